@@ -1,0 +1,186 @@
+"""Pinhole cameras in OpenCV axes.
+
+Conventions (shared by the renderer, the dataset loaders and the capture oracle):
+
+* camera axes: x right, y down, z forward (OpenCV);
+* `world_to_camera` maps homogeneous world points to camera coordinates;
+* a point (x, y, z) in camera axes lands at pixel coordinates
+  (u, v) = (fx x / z + cx, fy y / z + cy);
+* pixel (row i, column j) is the unit square [j, j + 1) x [i, i + 1) and is sampled at its
+  centre (j + 0.5, i + 0.5). A centred principal point is therefore cx = width / 2.
+
+A `Camera` is a pytree: `world_to_camera`, `fx`, `fy`, `cx`, `cy` are differentiable leaves
+(with optional leading batch axes, so a batch of cameras is one `Camera`), `width` and
+`height` are static metadata.
+"""
+
+import math
+
+import chex
+import jax.numpy as jnp
+import numpy as np
+
+from mfsample import numerics
+from mfsample._pytree import pytree_dataclass, static_field
+
+# Blender / OpenGL camera axes (x right, y up, z backward) -> OpenCV axes.
+_GL_TO_CV = np.diag([1.0, -1.0, -1.0, 1.0])
+
+
+@pytree_dataclass
+class Camera:
+  """A pinhole camera (see the module docstring for the conventions).
+
+  Attributes:
+    world_to_camera: [..., 4, 4] rigid transform, world -> camera (OpenCV axes).
+    fx, fy: [...] focal lengths in pixels.
+    cx, cy: [...] principal point in pixels (continuous coordinates).
+    width, height: image size in pixels (static).
+  """
+
+  world_to_camera: chex.Array
+  fx: chex.Array
+  fy: chex.Array
+  cx: chex.Array
+  cy: chex.Array
+  width: int = static_field()
+  height: int = static_field()
+
+  def __post_init__(self):
+    # Runs at construction, i.e. at trace time under jit: shape errors surface early.
+    for name in ("width", "height"):
+      value = getattr(self, name)
+      if not isinstance(value, (int, np.integer)) or isinstance(value, bool) or value < 1:
+        raise ValueError(f"Camera.{name} must be an integer >= 1, got {value!r}.")
+    w2c = self.world_to_camera
+    if hasattr(w2c, "shape") and tuple(w2c.shape[-2:]) != (4, 4):
+      raise ValueError(f"Camera.world_to_camera must have shape [..., 4, 4], got {w2c.shape}.")
+
+  # ---------------------------------------------------------------- constructors
+
+  @classmethod
+  def create(cls, world_to_camera, fx, fy, cx, cy, width, height):
+    """Builds a camera from arrays, broadcasting the intrinsics to the batch shape."""
+    w2c = jnp.asarray(world_to_camera)
+    if not jnp.issubdtype(w2c.dtype, jnp.floating):
+      w2c = w2c.astype(jnp.float32)
+    batch = w2c.shape[:-2]
+
+    def intrinsic(v):
+      return jnp.broadcast_to(jnp.asarray(v, dtype=w2c.dtype), batch)
+
+    return cls(w2c, intrinsic(fx), intrinsic(fy), intrinsic(cx), intrinsic(cy),
+               int(width), int(height))
+
+  @classmethod
+  def look_at(cls, eye, target, up, fov_x, width, height):
+    """A camera at `eye` looking at `target`, with `up` pointing up in the image.
+
+    Differentiable w.r.t. `eye`, `target` and `fov_x` (radians, horizontal field of view).
+    Accepts batched `eye` / `target` ([..., 3]). Square pixels, centred principal point.
+    When the viewing direction is parallel to `up`, a perpendicular fallback up vector is
+    used instead of producing NaNs.
+    """
+    eye = jnp.asarray(eye, dtype=jnp.result_type(float, eye))
+    target = jnp.asarray(target, dtype=eye.dtype)
+    up = jnp.broadcast_to(jnp.asarray(up, dtype=eye.dtype), jnp.broadcast_shapes(
+        eye.shape, target.shape))
+    forward = numerics.safe_normalize(target - eye, fallback=jnp.array([0.0, 0.0, 1.0]))
+    right = jnp.cross(forward, up)
+    # Fallback for forward || up: any axis not parallel to forward.
+    alt_up = jnp.where(jnp.abs(forward[..., :1]) < 0.9, jnp.array([1.0, 0.0, 0.0]),
+                       jnp.array([0.0, 1.0, 0.0]))
+    degenerate = jnp.sum(right * right, axis=-1, keepdims=True) < 1e-12
+    right = jnp.where(degenerate, jnp.cross(forward, alt_up), right)
+    right = numerics.safe_normalize(right)
+    down = jnp.cross(forward, right)
+    rotation = jnp.stack([right, down, forward], axis=-2)  # rows: camera axes in world
+    translation = -jnp.einsum("...ij,...j->...i", rotation, eye)
+    w2c = _compose(rotation, translation)
+    fx = 0.5 * width / jnp.tan(0.5 * jnp.asarray(fov_x, dtype=eye.dtype))
+    return cls.create(w2c, fx, fx, 0.5 * width, 0.5 * height, width, height)
+
+  @classmethod
+  def from_blender(cls, c2w, camera_angle_x, width, height):
+    """A camera from a NeRF Synthetic `transform_matrix` (camera-to-world, OpenGL axes).
+
+    Args:
+      c2w: [..., 4, 4] (or [..., 3, 4]) camera-to-world in Blender/OpenGL axes.
+      camera_angle_x: horizontal field of view in radians.
+      width, height: image size in pixels.
+    """
+    c2w = jnp.asarray(c2w, dtype=jnp.result_type(float, c2w))
+    if c2w.shape[-2] == 3:
+      bottom = jnp.broadcast_to(jnp.array([0.0, 0.0, 0.0, 1.0], c2w.dtype),
+                                c2w.shape[:-2] + (1, 4))
+      c2w = jnp.concatenate([c2w, bottom], axis=-2)
+    c2w_cv = c2w @ jnp.asarray(_GL_TO_CV, dtype=c2w.dtype)
+    rotation = jnp.swapaxes(c2w_cv[..., :3, :3], -1, -2)
+    translation = -jnp.einsum("...ij,...j->...i", rotation, c2w_cv[..., :3, 3])
+    fx = 0.5 * width / math.tan(0.5 * float(camera_angle_x))
+    return cls.create(_compose(rotation, translation), fx, fx, 0.5 * width, 0.5 * height,
+                      width, height)
+
+  # ---------------------------------------------------------------- derived values
+
+  @property
+  def rotation(self):
+    """[..., 3, 3] world -> camera rotation."""
+    return self.world_to_camera[..., :3, :3]
+
+  @property
+  def translation(self):
+    """[..., 3] world -> camera translation."""
+    return self.world_to_camera[..., :3, 3]
+
+  @property
+  def center(self):
+    """[..., 3] camera centre in world coordinates (-R^T t)."""
+    return -jnp.einsum("...ji,...j->...i", self.rotation, self.translation)
+
+  @property
+  def camera_to_world(self):
+    """[..., 4, 4] inverse of `world_to_camera` (assumed rigid)."""
+    rot_t = jnp.swapaxes(self.rotation, -1, -2)
+    return _compose(rot_t, self.center)
+
+  @property
+  def batch_shape(self):
+    return tuple(self.world_to_camera.shape[:-2])
+
+  def __getitem__(self, index):
+    """Indexes the batch axes: `cameras[3]`, `cameras[:5]`."""
+    return Camera(self.world_to_camera[index], self.fx[index], self.fy[index],
+                  self.cx[index], self.cy[index], self.width, self.height)
+
+  def __len__(self):
+    if not self.batch_shape:
+      raise TypeError("len() of an unbatched Camera")
+    return self.batch_shape[0]
+
+  def world_to_camera_points(self, points):
+    """[..., P, 3] world points -> camera coordinates (same batch axes as the camera)."""
+    return (jnp.einsum("...ij,...pj->...pi", self.rotation, points)
+            + self.translation[..., None, :])
+
+  def project(self, points):
+    """[..., P, 3] world points -> ([..., P, 2] pixel coordinates (u, v), [..., P] depth z).
+
+    Pixel coordinates are continuous: pixel (i, j) is centred at (j + 0.5, i + 0.5).
+    Points at or behind the camera get non-finite-free but meaningless coordinates; check
+    the returned depth.
+    """
+    cam = self.world_to_camera_points(points)
+    z = cam[..., 2]
+    z_safe = jnp.where(jnp.abs(z) > 1e-12, z, 1e-12)
+    u = self.fx[..., None] * cam[..., 0] / z_safe + self.cx[..., None]
+    v = self.fy[..., None] * cam[..., 1] / z_safe + self.cy[..., None]
+    return jnp.stack([u, v], axis=-1), z
+
+
+def _compose(rotation, translation):
+  """[..., 3, 3], [..., 3] -> [..., 4, 4] homogeneous transform."""
+  top = jnp.concatenate([rotation, translation[..., :, None]], axis=-1)
+  bottom = jnp.broadcast_to(jnp.array([0.0, 0.0, 0.0, 1.0], dtype=rotation.dtype),
+                            rotation.shape[:-2] + (1, 4))
+  return jnp.concatenate([top, bottom], axis=-2)

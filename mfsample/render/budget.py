@@ -1,0 +1,62 @@
+"""Host-side budget management: grow `max_intersections` instead of truncating.
+
+`render` never drops work silently: when the padded intersection list exceeds
+`settings.max_intersections`, `stats.overflow` is set and `stats.num_padded` says how much
+was needed. These helpers turn that into new settings, growing the budget to the next power
+of two, so a jitted caller recompiles at most log2(need / budget) times.
+"""
+
+import numpy as np
+
+from mfsample.render.settings import RenderSettings
+
+
+class BudgetExceededError(RuntimeError):
+  """Raised when a render overflowed and growing the budget is not allowed."""
+
+
+def required_budget(settings: RenderSettings, stats) -> int:
+  """The smallest valid power-of-two budget that holds `stats` (max over any batch axes)."""
+  need = int(np.max(np.asarray(stats.num_padded)))
+  quantum = settings.chunk_size * settings.chunks_per_step
+  budget = max(quantum, 1 << max(need - 1, 0).bit_length())
+  return -(-budget // quantum) * quantum
+
+
+def fit_budget(settings: RenderSettings, stats, *, allow_shrink=False) -> RenderSettings:
+  """Settings whose budget holds the render that produced `stats`.
+
+  Grows to the next power of two >= the padded intersection count (never shrinks unless
+  `allow_shrink`, so a training loop does not oscillate between compilations).
+  """
+  budget = required_budget(settings, stats)
+  if not allow_shrink:
+    budget = max(budget, settings.max_intersections)
+  if budget == settings.max_intersections:
+    return settings
+  return settings.replace(max_intersections=budget)
+
+
+def render_with_budget(render_fn, settings: RenderSettings, *args, max_budget=1 << 26,
+                       **kwargs):
+  """Calls `render_fn(*args, settings=settings, **kwargs)` until nothing overflows.
+
+  Args:
+    render_fn: a (possibly jitted, possibly vmapped) function returning something with a
+      `.stats` field of `TileStats`.
+    settings: the starting settings.
+    max_budget: refuse (BudgetExceededError) to grow beyond this many intersections.
+
+  Returns:
+    (output, settings) with the settings that sufficed, to reuse on the next call.
+  """
+  while True:
+    out = render_fn(*args, settings=settings, **kwargs)
+    if not bool(np.any(np.asarray(out.stats.overflow))):
+      return out, settings
+    grown = fit_budget(settings, out.stats)
+    if grown.max_intersections > max_budget:
+      raise BudgetExceededError(
+          f"render needs {int(np.max(np.asarray(out.stats.num_padded)))} intersections, "
+          f"more than max_budget={max_budget}")
+    settings = grown
