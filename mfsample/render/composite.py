@@ -78,37 +78,39 @@ def composite(layout: TileLayout, means2d, conics, opacities, features, width, h
   local = jnp.arange(ts * ts, dtype=jnp.int32)
   local_x = (local % ts).astype(dtype) + 0.5
   local_y = (local // ts).astype(dtype) + 0.5
-  strict_lower_c = jnp.tril(jnp.ones((chunk, chunk), dtype), k=-1)
+  strict_upper_c = jnp.triu(jnp.ones((chunk, chunk), dtype), k=1)  # [d, c] = 1 if d < c
   strict_lower_g = jnp.tril(jnp.ones((steps_g, steps_g), bool), k=-1)
   log_t_min = math.log(settings.transmittance_min)
   cut = -0.5 * settings.radius_sigma ** 2
 
   def blend_step(carry, x: _ChunkInputs):
+    # Arrays are pixel-major, [G, P, C]: the prefix sum and the feature sum then contract
+    # the minor axis, which measured 2x faster on CPU than [G, C, P].
     prev_tile, prev_log_t = carry
     tile = x.tile  # [G]
     origin_x = ((tile % tiles_x) * ts).astype(dtype)
     origin_y = ((tile // tiles_x) * ts).astype(dtype)
-    dx = (origin_x[:, None] + local_x)[:, None, :] - x.means2d[..., 0][..., None]  # [G,C,P]
-    dy = (origin_y[:, None] + local_y)[:, None, :] - x.means2d[..., 1][..., None]
-    ca, cb, cc = (x.conics[..., k][..., None] for k in range(3))
+    dx = (origin_x[:, None] + local_x)[:, :, None] - x.means2d[:, None, :, 0]  # [G, P, C]
+    dy = (origin_y[:, None] + local_y)[:, :, None] - x.means2d[:, None, :, 1]
+    ca, cb, cc = (x.conics[:, None, :, k] for k in range(3))
     power = -0.5 * (ca * dx * dx + cc * dy * dy) - cb * dx * dy
-    alpha = jnp.minimum(settings.alpha_max, x.opacities[..., None] * jnp.exp(power))
-    keep = x.live[..., None] & (power >= cut) & (alpha >= settings.alpha_min)
+    alpha = jnp.minimum(settings.alpha_max, x.opacities[:, None, :] * jnp.exp(power))
+    keep = x.live[:, None, :] & (power >= cut) & (alpha >= settings.alpha_min)
     alpha = jnp.where(keep, alpha, 0.0)
-    log_keep = jnp.log1p(-alpha)  # [G, C, P], >= log(1 - alpha_max)
+    log_keep = jnp.log1p(-alpha)  # >= log(1 - alpha_max): finite
 
     # log T before each Gaussian = carry + earlier chunks of the tile + earlier in chunk.
-    within = jnp.einsum("cd,gdp->gcp", strict_lower_c, log_keep)
-    chunk_total = jnp.sum(log_keep, axis=1)  # [G, P]
+    within = log_keep @ strict_upper_c  # [G, P, C]
+    chunk_total = jnp.sum(log_keep, axis=-1)  # [G, P]
     same_tile = strict_lower_g & (tile[:, None] == tile[None, :])
     before_chunk = jnp.where(same_tile, 1.0, 0.0).astype(dtype) @ chunk_total
     before_chunk += jnp.where((tile == prev_tile)[:, None], prev_log_t[None, :], 0.0)
-    log_t = before_chunk[:, None, :] + within
+    log_t = before_chunk[:, :, None] + within
 
     include = log_t + log_keep >= log_t_min
     weight = jnp.where(include, alpha * jnp.exp(log_t), 0.0)
-    blended = jnp.einsum("gcp,gcf->gpf", weight, x.features)  # [G, P, F]
-    coverage = jnp.sum(weight, axis=1)  # [G, P]
+    blended = jnp.einsum("gpc,gcf->gpf", weight, x.features)  # [G, P, F]
+    coverage = jnp.sum(weight, axis=-1)  # [G, P]
     new_carry = (tile[-1], before_chunk[-1] + chunk_total[-1])
     return new_carry, (blended, coverage)
 
