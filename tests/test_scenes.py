@@ -14,7 +14,6 @@ import pytest
 import mfsample
 from mfsample.camera import Camera
 from mfsample.data import export_blender, load_blender
-from mfsample.render import render_jit
 from mfsample.render.sh import sh_basis
 from mfsample.scenes import (
     SCENES,
@@ -49,6 +48,17 @@ def _centroid(weights):
 
 
 # ------------------------------------------------------------------ without Mitsuba
+
+
+def test_exports_exist_and_are_documented():
+  import inspect
+
+  import mfsample.scenes
+  for name in mfsample.scenes.__all__:
+    obj = getattr(mfsample.scenes, name)
+    if callable(obj):  # constants (SCENES, DEFAULT_SPP) are described where defined
+      doc = inspect.getdoc(obj)
+      assert doc and len(doc) > 20, f"mfsample.scenes.{name} has no real docstring"
 
 
 def test_import_does_not_import_mitsuba():
@@ -236,7 +246,7 @@ def test_known_point_lands_on_the_same_pixel_as_the_renderer(tmp_path):
   g = mfsample.Gaussians(means=jnp.asarray(point[None]), scales=jnp.full((1, 3), 0.01),
                          quats=jnp.array([[1.0, 0.0, 0.0, 0.0]]), opacities=jnp.array([0.9]),
                          sh=jnp.zeros((1, 1, 3)))
-  out = render_jit(g, cam, settings=mfsample.RenderSettings(max_intersections=512))
+  out = mfsample.render(g, cam, settings=mfsample.RenderSettings(max_intersections=512))
   assert not bool(out.stats.overflow)
   rendered = np.asarray(out.alpha)
   assert np.unravel_index(rendered.argmax(), rendered.shape) == pixel

@@ -54,7 +54,7 @@ def still_life():
   """A second scene: a cup holding a cube, a wall hiding a ball, a copper vase, a stack."""
   z = TABLE
   shapes = (
-      _plate(Material("plastic", (0.45, 0.45, 0.5), roughness=0.35)),
+      _plate(Material("plastic", (0.6, 0.6, 0.65), roughness=0.35)),
       Shape("cup", "cup", Material("plastic", (0.85, 0.85, 0.8), roughness=0.08),
             position=(-0.34, 0.34, z),
             params=(("radius", 0.17), ("height", 0.32), ("thickness", 0.02))),
