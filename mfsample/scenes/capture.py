@@ -24,7 +24,7 @@ from mfsample.scenes import mitsuba_bridge as bridge
 # Samples per pixel of ordinary captures (a perfect square: stratified sampling). Measured
 # with benchmarks/capture.py --pool: 100 + 50 views of the default scene at 100x100 in 220 s
 # on two cores shared with other jobs (load average ~5; ~0.9 s per view when less loaded),
-# under the 5-minute budget; the noise is about 39 dB PSNR against a converged render.
+# under the 5-minute budget.
 DEFAULT_SPP = 36
 # SH basis captures render 2 (degree + 1)^2 - 1 = 31 lights per camera at degree 3.
 DEFAULT_SH_SPP = 16
