@@ -1,0 +1,110 @@
+"""Time to score one candidate view: ours (M forward renders) against FisherRF (backward passes).
+
+Ours scores a candidate with M forward renders of sampled models (Eq. 10); FisherRF needs
+the diagonal Fisher information of the candidate's render, i.e. backward passes (here K
+Rademacher probes, one vector-Jacobian product each). Both run on the same model, the same
+candidate cameras and the same render settings, in one process, and the ratio of the
+per-candidate times is reported (median over repeats, after compilation).
+
+  PYTHONPATH=. python benchmarks/candidate_scoring.py
+  PYTHONPATH=. python benchmarks/candidate_scoring.py --resolution=100 --num_gaussians=5000
+"""
+
+import json
+import os
+import platform
+import statistics
+import time
+
+from absl import app, flags
+
+_N = flags.DEFINE_integer("num_gaussians", 2000, "Gaussians of the (random) model.")
+_RES = flags.DEFINE_integer("resolution", 64, "Square image size of the candidates.")
+_CANDS = flags.DEFINE_integer("num_candidates", 32, "Candidates scored per timed call.")
+_M = flags.DEFINE_integer("samples", 2, "M, samples of ours (paper: 2).")
+_K = flags.DEFINE_list("probes", ["1", "4"], "FisherRF probes per candidate to time.")
+_REPEATS = flags.DEFINE_integer("repeats", 5, "Timed calls (median).")
+_OUT = flags.DEFINE_string("out", "results/bench_candidate_scoring.json", "JSON output.")
+
+
+def _median_seconds(fn, repeats):
+  import jax
+
+  jax.block_until_ready(fn())  # compile + warm up
+  times = []
+  for _ in range(repeats):
+    t0 = time.perf_counter()
+    jax.block_until_ready(fn())
+    times.append(time.perf_counter() - t0)
+  return statistics.median(times)
+
+
+def run():
+  import jax
+  import jax.numpy as jnp
+  import numpy as np
+  from mfsample.model import GROUPS, SamplerSpec, init_model
+
+  from mfsample import uncertainty as unc
+  from mfsample.planning import fisher, poses
+  from mfsample.render import RenderSettings
+
+  rng = np.random.default_rng(0)
+  n, res, b = _N.value, _RES.value, _CANDS.value
+  points = rng.normal(size=(n, 3))
+  points *= (rng.uniform(size=(n, 1)) ** (1 / 3)) / np.linalg.norm(points, axis=1, keepdims=True)
+  bounds = tuple(zip(GROUPS, (1.0, 20.0, 2.0, 20.0, 0.5, 0.5), strict=True))
+  model = init_model(jax.random.PRNGKey(0), points,
+                     spec=SamplerSpec("lowrank", 2, GROUPS, bounds), sh_degree=0,
+                     init_scales={g: 0.01 for g in GROUPS}, init_opacity=0.5,
+                     colors=rng.uniform(size=(n, 3)))
+  sphere = poses.SphereSpec(radius=3.0, width=res, height=res)
+  uv = poses.random_uv(rng, b, sphere).astype(np.float32)
+  cams = poses.spherical_camera(jnp.asarray(uv), sphere)
+  bg = jnp.ones(3)
+  z = unc.uncertainty_z(model, _M.value, 6174)
+  _, settings = unc.score_cameras(model, cams, z, settings=RenderSettings(), background=bg)
+  det = model.replace(spec=SamplerSpec("deterministic"), params=model.params._replace(
+      spread={}), signs={})
+
+  def ours():
+    return unc.score_cameras(model, cams, z, settings=settings, background=bg)[0].values
+
+  result = {"num_gaussians": n, "resolution": res, "num_candidates": b, "samples": _M.value,
+            "budget": settings.max_intersections, "device": str(jax.devices()[0]),
+            "platform": platform.platform(), "cpu_count": os.cpu_count()}
+  t_ours = _median_seconds(ours, _REPEATS.value) / b
+  result["ours_seconds_per_candidate"] = t_ours
+  print(f"ours (M={_M.value} forward renders): {1e3 * t_ours:.2f} ms per candidate")
+  inverse = jax.tree.map(lambda x: jnp.ones_like(x), {g: det.params.mean[g]
+                                                      for g in fisher.DEFAULT_GROUPS
+                                                      if g in det.params.mean})
+  for k in (int(x) for x in _K.value):
+    @jax.jit
+    def fisher_candidates(key, k=k):
+      def one(camera, inv):
+        h, _ = fisher.fisher_diagonal(det, camera, key, num_probes=k, settings=settings,
+                                      background=bg, groups=tuple(inv))
+        return sum(jnp.sum(h[g] * inv[g]) for g in h)
+      return unc.map_cameras(one, cams, inverse)
+
+    t_f = _median_seconds(lambda f=fisher_candidates: f(jax.random.PRNGKey(1)),
+                          _REPEATS.value) / b
+    result[f"fisher_{k}_probes_seconds_per_candidate"] = t_f
+    result[f"ratio_fisher_{k}_probes_over_ours"] = t_f / t_ours
+    print(f"FisherRF ({k} probe backward passes): {1e3 * t_f:.2f} ms per candidate, "
+          f"{t_f / t_ours:.2f}x ours")
+  return result
+
+
+def main(argv):
+  del argv
+  result = run()
+  os.makedirs(os.path.dirname(_OUT.value) or ".", exist_ok=True)
+  with open(_OUT.value, "w") as f:
+    json.dump(result, f, indent=2)
+  print(f"wrote {_OUT.value}")
+
+
+if __name__ == "__main__":
+  app.run(main)

@@ -1,0 +1,178 @@
+"""FisherRF (Jiang et al. 2024): next views by the diagonal Fisher information of the model.
+
+For a deterministic 3DGS model with raw parameters theta and a camera whose render is
+I(theta) [H, W, 3], the diagonal of the Fisher information (Gauss-Newton Hessian of an L2
+loss) is, per parameter d,
+
+  H_d = sum over pixels p and channels c of (dI_pc / dtheta_d)^2 = diag(J^T J)_d.
+
+FisherRF computes it with a modified CUDA backward that squares per-pixel gradients. Here it
+is estimated without bias with Rademacher probes: for v in {-1, +1}^(H W 3),
+
+  E_v[(J^T v)_d^2] = sum_{p, q} J_pd J_qd E[v_p v_q] = sum_p J_pd^2 = H_d,
+
+so K probes cost K vector-Jacobian products (one backward pass each) per camera
+(`fisher_diagonal`). `fisher_diagonal_exact` forms J column by column and is meant for tiny
+images (tests check the estimator against it). The candidate score is FisherRF's
+
+  score(c) = sum_d H_d(c) / (H_d(train) + lambda),   lambda = 1e-6,
+
+with H(train) accumulated over the training views, and the candidate with the highest score
+is selected. As in FisherRF's default (`--filter_out_grad rotation`), the rotation
+parameters are left out (config `groups`). All candidates share the same probes (common
+random numbers: each score is still unbiased, and their differences are less noisy).
+"""
+
+import functools
+from typing import NamedTuple
+
+import chex
+import jax
+import jax.numpy as jnp
+
+from mfsample.model import activate
+from mfsample.render import RenderSettings, render
+from mfsample.render.budget import BudgetExceededError, fit_budget
+from mfsample.uncertainty import map_cameras
+
+# FisherRF leaves the rotations out (its default `--filter_out_grad rotation`).
+DEFAULT_GROUPS = ("means", "log_scales", "opacity_logits", "sh_dc", "sh_rest")
+
+
+def _split(mean, groups):
+  diff = {g: v for g, v in mean.items() if g in groups}
+  rest = {g: v for g, v in mean.items() if g not in groups}
+  return diff, rest
+
+
+def _image_fn(model, camera, background, settings, groups):
+  """(differentiable params, fn: params -> (rgb [H, W, 3], stats))."""
+  diff, rest = _split(model.params.mean, groups)
+
+  def image(params):
+    g = activate({**rest, **params}, model.mask, model.sh_degree)
+    out = render(g, camera, background=background, settings=settings)
+    return out.rgb, out.stats
+
+  return diff, image
+
+
+def rademacher(key, shape, dtype=jnp.float32):
+  """Independent +-1 entries with probability 1/2 each."""
+  return jnp.where(jax.random.bernoulli(key, 0.5, shape), 1.0, -1.0).astype(dtype)
+
+
+def fisher_diagonal(model, camera, key, *, num_probes, settings: RenderSettings, background,
+                    groups=DEFAULT_GROUPS):
+  """Unbiased estimate of H = diag(J^T J) of one camera with `num_probes` Rademacher probes.
+
+  Args:
+    model: `mfsample.model.Model` (its mean parameters are used).
+    camera: unbatched `Camera`.
+    key: PRNG key of the probes.
+    num_probes: K (static): K vector-Jacobian products.
+    settings: `RenderSettings` (static).
+    background: [3] colour.
+    groups: raw parameter groups to differentiate.
+
+  Returns:
+    ({group: [C, ...]} estimate of H, `TileStats` of the render).
+  """
+  diff, image = _image_fn(model, camera, background, settings, groups)
+  rgb, vjp, stats = jax.vjp(image, diff, has_aux=True)
+  probes = rademacher(key, (num_probes,) + rgb.shape, rgb.dtype)
+  grads = jax.lax.map(lambda v: vjp(v)[0], probes)  # sequential: memory of one backward
+  return jax.tree.map(lambda g: jnp.mean(jnp.square(g), axis=0), grads), stats
+
+
+def fisher_diagonal_exact(model, camera, *, settings: RenderSettings, background,
+                          groups=DEFAULT_GROUPS):
+  """The exact H = sum over pixels and channels of (dI/dtheta)^2 (H W 3 backward passes).
+
+  Only for tiny images: the reference that `fisher_diagonal` is tested against.
+  """
+  diff, image = _image_fn(model, camera, background, settings, groups)
+  jac = jax.jacrev(lambda p: image(p)[0])(diff)  # {group: [H, W, 3, C, ...]}
+  return jax.tree.map(lambda j: jnp.sum(jnp.square(j), axis=(0, 1, 2)), jac)
+
+
+class FisherScores(NamedTuple):
+  """FisherRF scores of a batch of candidates.
+
+  Attributes:
+    values: [B] candidate scores.
+    h_train: {group: [C, ...]} H accumulated over the training views.
+    num_padded: int32, the largest padded intersection count of any render.
+    overflow: bool, some render exceeded the budget (the scores are then invalid).
+  """
+
+  values: chex.Array
+  h_train: dict
+  num_padded: chex.Array
+  overflow: chex.Array
+
+
+@functools.partial(jax.jit, static_argnames=("settings", "num_probes", "train_probes",
+                                             "groups", "num_devices"))
+def _fisher_scores(model, train_cameras, candidates, key, background, reg, *, settings,
+                   num_probes, train_probes, groups, num_devices):
+  k_train, k_cand = jax.random.split(key)
+  train_keys = jax.random.split(k_train, train_cameras.batch_shape[0])
+
+  def train_one(inputs):
+    camera, k = inputs
+    return fisher_diagonal(model, camera, k, num_probes=train_probes, settings=settings,
+                           background=background, groups=groups)
+
+  h_views, train_stats = jax.lax.map(train_one, (train_cameras, train_keys))
+  h_train = jax.tree.map(lambda h: jnp.sum(h, axis=0), h_views)
+  inverse = jax.tree.map(lambda h: 1.0 / (h + reg), h_train)
+
+  def score_one(camera, inv):
+    h, stats = fisher_diagonal(model, camera, k_cand, num_probes=num_probes,
+                               settings=settings, background=background, groups=groups)
+    total = sum(jnp.sum(h[g] * inv[g]) for g in h)
+    return total, stats
+
+  values, cand_stats = map_cameras(score_one, candidates, inverse, num_devices=num_devices)
+  overflow = jnp.any(train_stats.overflow) | jnp.any(cand_stats.overflow)
+  num_padded = jnp.maximum(jnp.max(train_stats.num_padded), jnp.max(cand_stats.num_padded))
+  return FisherScores(values, h_train, num_padded, overflow)
+
+
+def fisher_scores(model, train_cameras, candidates, key, *, settings: RenderSettings,
+                  background, num_probes=1, train_probes=8, reg=1e-6, groups=DEFAULT_GROUPS,
+                  num_devices=1, max_budget=1 << 24):
+  """FisherRF scores sum_d H_d(candidate) / (H_d(train) + reg) of every candidate.
+
+  Args:
+    model: deterministic `mfsample.model.Model`.
+    train_cameras: `Camera` [V] of the training views.
+    candidates: `Camera` [B].
+    key: PRNG key of the probes.
+    settings: starting `RenderSettings` (the budget grows on overflow).
+    background: [3] colour.
+    num_probes: probes per candidate (one backward pass each).
+    train_probes: probes per training view (H(train) sits in a denominator, where noise
+      hurts more: use more).
+    reg: lambda of the score (FisherRF: 1e-6).
+    groups: parameter groups (FisherRF leaves out rotations).
+    num_devices: devices to shard the candidates over.
+    max_budget: refuse to grow the budget beyond this.
+
+  Returns:
+    (`FisherScores`, settings that sufficed).
+  """
+  background = jnp.asarray(background, model.params.mean["means"].dtype)
+  groups = tuple(g for g in groups if g in model.params.mean)
+  while True:
+    out = _fisher_scores(model, train_cameras, candidates, key, background, reg,
+                         settings=settings, num_probes=int(num_probes),
+                         train_probes=int(train_probes), groups=groups,
+                         num_devices=int(num_devices))
+    if not bool(out.overflow):
+      return out, settings
+    grown = fit_budget(settings, out)  # reads out.num_padded
+    if grown.max_intersections > max_budget:
+      raise BudgetExceededError(f"FisherRF scoring needs more than max_budget={max_budget}")
+    settings = grown

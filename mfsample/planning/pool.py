@@ -1,0 +1,155 @@
+"""The data of a planning run: candidate pool, test views, and (when there is one) an oracle.
+
+* "scene": a built-in Mitsuba scene (`mfsample.scenes`). Candidates and test views are
+  captured once (cached on disk); the oracle captures any new pose, so the optimising
+  strategies can run.
+* "blender": a NeRF Synthetic scene on disk (e.g. lego): candidates = the train split,
+  test = the test split. No oracle: only the selection strategies run.
+* "synthetic": random ground-truth Gaussians rendered by `mfsample.render` (tests and the
+  notebook): every pose has a ground truth, no files and no Mitsuba needed.
+"""
+
+import math
+from collections.abc import Callable
+from pathlib import Path
+from typing import NamedTuple
+
+import jax.numpy as jnp
+import numpy as np
+
+from mfsample.camera import Camera
+from mfsample.data.views import Views
+from mfsample.planning import poses
+from mfsample.render import RenderSettings, render
+from mfsample.render.budget import render_with_budget
+
+REPO_ROOT = Path(__file__).resolve().parents[2]
+
+
+class Pool(NamedTuple):
+  """Everything a planning run needs to know about the scene.
+
+  Attributes:
+    name: scene name (for tables and figures).
+    candidates: `Views` of the candidate pool (images and cameras).
+    test: held-out `Views`.
+    background: RGB the images are composited on.
+    bounds: (low [3], high [3]) box holding the scene: the random initial point cloud and
+      the ACP grid live in it.
+    sphere: `poses.SphereSpec` of the camera sphere (always set; for a fixed pool it is
+      fitted to the candidates and used only for figures).
+    oracle: camera -> [H, W, 3] ground-truth image, or None for a fixed pool.
+  """
+
+  name: str
+  candidates: Views
+  test: Views
+  background: tuple
+  bounds: tuple
+  sphere: poses.SphereSpec
+  oracle: Callable | None
+
+
+def resolve_path(path):
+  """`path` if absolute, else relative to the repository root."""
+  p = Path(str(path)).expanduser()
+  return p if p.is_absolute() else (REPO_ROOT / p).resolve()
+
+
+def make_pool(cfg) -> Pool:
+  """The `Pool` that the `data` block of a planning config describes."""
+  background = tuple(float(c) for c in cfg.background)
+  if cfg.kind == "scene":
+    return _scene_pool(cfg, background)
+  if cfg.kind == "blender":
+    return _blender_pool(cfg, background)
+  if cfg.kind == "synthetic":
+    return _synthetic_pool(cfg, background)
+  raise ValueError(f"data.kind must be 'scene', 'blender' or 'synthetic', got {cfg.kind!r}")
+
+
+def _scene_pool(cfg, background):
+  from mfsample import scenes
+
+  scene = scenes.get_scene(cfg.scene)
+  cache = str(resolve_path(cfg.cache_dir)) if cfg.get("cache_dir") else None
+  w, h = int(cfg.width), int(cfg.height)
+  cands = scene.candidate_cameras(w, h, num=int(cfg.num_candidates), seed=int(cfg.pool_seed))
+  tests = scene.test_cameras(w, h, num=int(cfg.num_test), seed=int(cfg.pool_seed) + 1)
+  kw = dict(spp=int(cfg.spp), cache_dir=cache, background=background)
+  candidates = scenes.capture_views(scene, cands, progress=cfg.progress, **kw)
+  test = scenes.capture_views(scene, tests, progress=cfg.progress, **kw)
+
+  def oracle(camera):
+    return scenes.capture(scene, camera, **kw)[0]
+
+  c, r = np.asarray(scene.center, np.float64), float(scene.radius)
+  return Pool(scene.name, candidates, test, background, (c - r, c + r),
+              poses.SphereSpec.from_scene(scene, w, h), oracle)
+
+
+def _blender_pool(cfg, background):
+  from mfsample.data import load_blender
+
+  path = resolve_path(cfg.path)
+  kw = dict(downscale=int(cfg.downscale), background=background)
+  candidates = load_blender(path, "train", **kw)
+  test = load_blender(path, "test", **kw)
+  if int(cfg.test_every) > 1:
+    test = test.subset(np.arange(0, len(test), int(cfg.test_every)))
+  lo, hi = cfg.bounds
+  return Pool(path.name, candidates, test, background, (np.full(3, lo), np.full(3, hi)),
+              poses.SphereSpec.from_cameras(candidates.cameras), None)
+
+
+def synthetic_scene(num, seed, radius=0.6, sh_degree=0):
+  """Random, fairly opaque ground-truth Gaussians in the cube [-radius, radius]^3."""
+  from mfsample.gaussians import Gaussians
+  from mfsample.render.sh import rgb_to_sh_dc
+
+  rng = np.random.default_rng(seed)
+  k = (sh_degree + 1) ** 2
+  sh = np.zeros((num, k, 3), np.float32)
+  sh[:, 0] = np.asarray(rgb_to_sh_dc(rng.uniform(0.05, 0.95, (num, 3))))
+  return Gaussians(
+      means=jnp.asarray(rng.uniform(-radius, radius, (num, 3)), jnp.float32),
+      scales=jnp.asarray(np.exp(rng.uniform(np.log(0.03), np.log(0.12), (num, 3))),
+                         jnp.float32),
+      quats=jnp.asarray(rng.normal(size=(num, 4)), jnp.float32),
+      opacities=jnp.asarray(rng.uniform(0.5, 0.95, num), jnp.float32),
+      sh=jnp.asarray(sh),
+  )
+
+
+def _synthetic_pool(cfg, background):
+  s = cfg.synthetic
+  truth = synthetic_scene(int(s.num_gaussians), int(s.seed), radius=float(s.radius))
+  sphere = poses.SphereSpec(radius=float(s.distance), v_range=tuple(s.v_range),
+                            fov_x=math.radians(float(s.fov_x_deg)), width=int(cfg.width),
+                            height=int(cfg.height))
+  bg = jnp.asarray(background, jnp.float32)
+  state = {"settings": RenderSettings(max_intersections=1 << 12)}
+
+  def oracle(camera):
+    out, state["settings"] = render_with_budget(render, state["settings"], truth, camera,
+                                                background=bg)
+    return np.asarray(jnp.clip(out.rgb, 0.0, 1.0))
+
+  def views(num, stream):
+    uv = poses.random_uv(np.random.default_rng([int(cfg.pool_seed), stream]), num, sphere)
+    cams = poses.spherical_camera(jnp.asarray(uv, jnp.float32), sphere)
+    images = np.stack([oracle(cams[i]) for i in range(num)])
+    return Views(images, cams, names=tuple(f"synthetic-{stream}-{i}" for i in range(num)))
+
+  r = float(s.radius) + 0.2
+  return Pool("synthetic", views(int(cfg.num_candidates), 0), views(int(cfg.num_test), 1),
+              background, (np.full(3, -r), np.full(3, r)), sphere, oracle)
+
+
+def stack_cameras(cameras):
+  """A batched `Camera` from a list of unbatched ones (same image size)."""
+  first = cameras[0]
+  return Camera(jnp.stack([c.world_to_camera for c in cameras]),
+                jnp.stack([c.fx for c in cameras]), jnp.stack([c.fy for c in cameras]),
+                jnp.stack([c.cx for c in cameras]), jnp.stack([c.cy for c in cameras]),
+                first.width, first.height)

@@ -1,0 +1,427 @@
+"""The active camera planning protocol (paper Sec. 5.1; METHOD.md Sec. 3): pure steps, thin loop.
+
+For every seed and strategy:
+
+1. start from one candidate view (`initial_index`);
+2. each round trains a fresh model of the strategy's kind on the current views
+   (`config.round_train`, `train_on_views`), asks the strategy for the next camera, and adds
+   that view: the pool image for a candidate, an oracle capture for a new pose;
+3. at each count in `config.eval_views` (5 and 10) a plain deterministic model is trained
+   from scratch on the first views (`config.final_train`) and evaluated on the held-out
+   test views (PSNR / SSIM / LPIPS).
+
+Results are written per (strategy, seed) as soon as they finish (`runs/*.json`), so a
+killed run resumes without redoing finished work; `results.json` and `table.md` aggregate
+them, `cameras.png` and `landscape.png` show the chosen cameras and the uncertainty
+landscape (paper Fig. 7).
+
+Models are trained afresh per round as the authors do; identical trainings (the same kind,
+seed and views, e.g. the first round of the three "Ours" variants) are shared through an
+in-memory cache.
+"""
+
+import collections
+import hashlib
+import json
+import os
+import time
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from mfsample import uncertainty as unc
+from mfsample.data.views import Views
+from mfsample.planning import figures, poses, strategies, training, variance
+from mfsample.planning.pool import Pool, make_pool, stack_cameras
+
+
+class Selected(NamedTuple):
+  """One view of a trajectory.
+
+  Attributes:
+    index: candidate index, or None for a captured new pose.
+    camera: unbatched `Camera`.
+    image: [H, W, 3].
+    score: the strategy's score of the choice (nan for the initial view).
+    seconds: wall-clock of the round that chose it (training + selection + capture).
+    info: json-able extras (optimisation start / end, ...).
+  """
+
+  index: int | None
+  camera: object
+  image: np.ndarray
+  score: float
+  seconds: float
+  info: dict
+
+
+# ------------------------------------------------------------------ pure pieces
+
+
+def initial_index(config, seed, num_candidates):
+  """The first view: `config.initial_view`, or (if < 0) a seeded random candidate."""
+  if int(config.initial_view) >= 0:
+    return int(config.initial_view)
+  return int(np.random.default_rng([int(seed), 5]).integers(num_candidates))
+
+
+def view_key(sel: Selected):
+  """A hashable identity of a view (its candidate index or its pose)."""
+  if sel.index is not None:
+    return ("c", int(sel.index))
+  w2c = np.round(np.asarray(sel.camera.world_to_camera, np.float64), 6) + 0.0
+  return ("p", hashlib.sha1(w2c.tobytes()).hexdigest()[:16])
+
+
+def as_views(selected) -> Views:
+  """`Views` of a list of `Selected`."""
+  return Views(np.stack([s.image for s in selected]).astype(np.float32),
+               stack_cameras([s.camera for s in selected]),
+               names=tuple(str(view_key(s)) for s in selected))
+
+
+def round_config(config, kind):
+  """The training config of one round for a model kind (a copy)."""
+  cfg = config.round_train.copy_and_resolve_references()
+  with cfg.unlocked():
+    if kind in ("deterministic", "variance"):
+      cfg.sampler.kind = "deterministic"
+  return cfg
+
+
+class Trainer:
+  """Trains (and caches) models for the rounds and the final evaluation.
+
+  Host-side bookkeeping only: the cache maps (kind, seed, view keys) to trained models, and
+  `settings` remembers the render budgets that sufficed, so later calls start from them.
+  """
+
+  def __init__(self, config, pool: Pool, cache_size=8):
+    self.config = config
+    self.pool = pool
+    self.cache = collections.OrderedDict()
+    self.cache_size = cache_size
+    self.settings = {}
+    self.train_seconds = 0.0
+
+  def _cached(self, key, make):
+    if key in self.cache:
+      self.cache.move_to_end(key)
+      return self.cache[key]
+    value = make()
+    self.cache[key] = value
+    while len(self.cache) > self.cache_size:
+      self.cache.popitem(last=False)
+    return value
+
+  def round_model(self, kind, selected, seed):
+    """The model of `kind` trained on the `selected` views (cached)."""
+    keys = tuple(view_key(s) for s in selected)
+
+    def make():
+      t0 = time.perf_counter()
+      base = "deterministic" if kind == "variance" else kind
+      cfg = round_config(self.config, base)
+      trained = self._cached(("model", base, seed, keys), lambda: training.train_on_views(
+          cfg, as_views(selected), seed=seed, bounds=self.pool.bounds,
+          pad_to=self.config.max_views, settings=self.settings.get(("round", base))))
+      self.settings[("round", base)] = trained.settings
+      model = trained.model
+      if kind == "variance":
+        a = self.config.strategy.activenerf
+        model, _ = variance.fit_variance(
+            model, as_views(selected), settings=trained.settings,
+            background=self.pool.background, steps=int(a.steps), lr=float(a.lr),
+            prior_var=float(a.prior_var), beta_min=float(a.beta_min),
+            prior_weight=float(a.prior_weight), seed=seed)
+      self.train_seconds += time.perf_counter() - t0
+      return model
+
+    if kind == "variance":
+      return self._cached(("variance", seed, keys), make)
+    return make()
+
+  def final_model(self, selected, seed):
+    """The plain model of the final evaluation, trained on `selected` (cached)."""
+    keys = tuple(view_key(s) for s in selected)
+
+    def make():
+      t0 = time.perf_counter()
+      trained = training.train_final(self.config.final_train, as_views(selected), seed=seed,
+                                     bounds=self.pool.bounds,
+                                     settings=self.settings.get("final"))
+      self.settings["final"] = trained.settings
+      self.train_seconds += time.perf_counter() - t0
+      return trained.model
+
+    return self._cached(("final", seed, keys), make)
+
+
+def evaluate_model(model, pool: Pool, config, lpips_fn, settings):
+  """Test metrics of a model: {"psnr", "ssim", "lpips"} means over `pool.test`."""
+  from mfsample.train.evaluate import evaluate
+
+  ev = evaluate(model, pool.test, background=pool.background, settings=settings,
+                lpips_fn=lpips_fn)
+  return {k: ev.metrics[k] for k in ("psnr", "ssim", "lpips")}
+
+
+def plan_views(strategy, pool: Pool, config, seed, trainer: Trainer, budgets, on_round=None):
+  """Runs one strategy for one seed up to `config.max_views` views.
+
+  Args:
+    strategy: `strategies.Strategy`.
+    pool: `Pool`.
+    config: planning config.
+    seed: int.
+    trainer: `Trainer` (models, caches).
+    budgets: {purpose: RenderSettings} shared across strategies; updated in place.
+    on_round: optional callback(round_index, selected list) after every added view.
+
+  Returns:
+    list of `Selected`, the initial view first.
+  """
+  if strategy.new_poses and pool.oracle is None:
+    raise ValueError(f"strategy {strategy.name} proposes new poses; the pool "
+                     f"{pool.name!r} has no oracle to capture them")
+  cands = pool.candidates
+  first = initial_index(config, seed, len(cands))
+  selected = [Selected(first, cands.cameras[first], np.asarray(cands.images[first]),
+                       float("nan"), 0.0, {})]
+  available = np.ones(len(cands), bool)
+  available[first] = False
+  key = jax.random.fold_in(jax.random.PRNGKey(int(seed)), strategies.NAMES.index(
+      strategy.name) if strategy.name in strategies.NAMES else 99)
+  while len(selected) < int(config.max_views):
+    t0 = time.perf_counter()
+    model = None
+    if strategy.model_kind is not None:
+      model = trainer.round_model(strategy.model_kind, selected, seed)
+    inputs = strategies.Inputs(
+        model=model, train_cameras=stack_cameras([s.camera for s in selected]),
+        candidates=cands.cameras, available=available, sphere=pool.sphere,
+        bounds=pool.bounds, background=pool.background, settings=dict(budgets))
+    choice = strategy.select(inputs, jax.random.fold_in(key, len(selected)))
+    budgets.update(choice.info.get("settings", {}))
+    if choice.index is not None:
+      image = np.asarray(cands.images[choice.index])
+      available[choice.index] = False
+    else:
+      image = np.asarray(pool.oracle(choice.camera))
+    info = {}
+    if "uv0" in choice.info:
+      info = {"uv0": choice.info["uv0"].tolist(), "uv": choice.info["uv"].tolist(),
+              "start_index": choice.info.get("start_index"),
+              "u_start": float(choice.info["values"][0]),
+              "u_end": float(choice.info["values"][-1])}
+    selected.append(Selected(choice.index, choice.camera, image, choice.score,
+                             time.perf_counter() - t0, info))
+    if on_round is not None:
+      on_round(len(selected) - 1, selected)
+  return selected
+
+
+def run_record(strategy, seed, selected, metrics, seconds, pool):
+  """The json-able record of one (strategy, seed) run."""
+  uv = poses.camera_to_uv(stack_cameras([s.camera for s in selected]), pool.sphere.center)
+  return {
+      "strategy": strategy.name, "label": strategy.label, "seed": int(seed),
+      "indices": [None if s.index is None else int(s.index) for s in selected],
+      "world_to_camera": [np.asarray(s.camera.world_to_camera).tolist() for s in selected],
+      "uv": uv.tolist(), "scores": [float(s.score) for s in selected],
+      "round_seconds": [float(s.seconds) for s in selected],
+      "optimisation": [s.info for s in selected],
+      "metrics": {str(n): m for n, m in metrics.items()}, "seconds": float(seconds),
+  }
+
+
+# ------------------------------------------------------------------ aggregation
+
+
+METRICS = (("psnr", "PSNR", "↑"), ("ssim", "SSIM", "↑"), ("lpips", "LPIPS", "↓"))
+
+
+def summarise(records, eval_views):
+  """{strategy: {n: {metric: {"mean", "std", "values"}}}} over seeds (std: population)."""
+  out = {}
+  for rec in records:
+    s = out.setdefault(rec["strategy"], {"label": rec["label"]})
+    for n in eval_views:
+      m = rec["metrics"].get(str(n))
+      if m is None:
+        continue
+      for name, _, _ in METRICS:
+        if m.get(name) is None:
+          continue
+        s.setdefault(str(n), {}).setdefault(name, {"values": []})["values"].append(m[name])
+  for s in out.values():
+    for n in eval_views:
+      for entry in s.get(str(n), {}).values():
+        v = np.asarray(entry["values"], np.float64)
+        entry["mean"], entry["std"] = float(v.mean()), float(v.std())
+  return out
+
+
+def table_markdown(summary, eval_views, order=strategies.NAMES, title=None):
+  """The paper's Table 1 layout: strategies x (PSNR, SSIM, LPIPS) at each view count."""
+  head = ["Method"] + [f"{label}{arrow} ({n} views)" for n in eval_views
+                       for _, label, arrow in METRICS]
+  lines = [] if title is None else [title, ""]
+  lines += ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+  digits = {"psnr": 2, "ssim": 3, "lpips": 3}
+  for name in [n for n in order if n in summary] + [n for n in summary if n not in order]:
+    s = summary[name]
+    row = [s["label"]]
+    for n in eval_views:
+      for metric, _, _ in METRICS:
+        e = s.get(str(n), {}).get(metric)
+        d = digits[metric]
+        row.append("-" if e is None else f"{e['mean']:.{d}f} ± {e['std']:.{d}f}")
+    lines.append("| " + " | ".join(row) + " |")
+  return "\n".join(lines) + "\n"
+
+
+def _write_json(path, obj):
+  tmp = f"{path}.tmp"
+  with open(tmp, "w") as f:
+    json.dump(obj, f, indent=1)
+  os.replace(tmp, path)
+
+
+# ------------------------------------------------------------------ the loop
+
+
+def run_camera_planning(config, workdir):
+  """Runs the protocol for every seed and strategy of `config`; writes and returns results.
+
+  Writes to `workdir`: `runs/<strategy>-seed<seed>.json` (as each finishes; existing ones
+  are loaded, not recomputed), `results.json`, `table.md`, `cameras.png`, `landscape.png`
+  (+ `landscape.npz`), `config.json`.
+
+  Returns:
+    the results dict (as in `results.json`).
+  """
+  from tqdm.auto import tqdm
+
+  t_start = time.perf_counter()
+  os.makedirs(os.path.join(workdir, "runs"), exist_ok=True)
+  with open(os.path.join(workdir, "config.json"), "w") as f:
+    f.write(config.to_json_best_effort(indent=2))
+  t0 = time.perf_counter()
+  pool = make_pool(config.data)
+  pool_seconds = time.perf_counter() - t0
+  names = list(config.strategies)
+  if pool.oracle is None:
+    skipped = [n for n in names if strategies.make_strategy(n, config).new_poses]
+    names = [n for n in names if n not in skipped]
+  else:
+    skipped = []
+  todo = [(seed, name) for seed in config.seeds for name in names]
+  eval_views = tuple(int(n) for n in config.eval_views)
+  rounds = int(config.max_views) - 1
+  lpips_fn = None
+  if config.eval.lpips_net:
+    from mfsample import metrics as metrics_lib
+    lpips_fn = metrics_lib.make_lpips(config.eval.lpips_net)
+  trainer = Trainer(config, pool)
+  budgets = {}
+  records = []
+  bar = tqdm(total=len(todo) * (rounds + len(eval_views)), desc="camera planning",
+             disable=not config.progress, dynamic_ncols=True)
+  for seed, name in todo:
+    path = os.path.join(workdir, "runs", f"{name}-seed{seed}.json")
+    if os.path.exists(path):
+      with open(path) as f:
+        records.append(json.load(f))
+      bar.update(rounds + len(eval_views))
+      continue
+    strategy = strategies.make_strategy(name, config)
+    bar.set_postfix_str(f"{strategy.label}, seed {seed}")
+    t_run = time.perf_counter()
+    selected = plan_views(strategy, pool, config, seed, trainer, budgets,
+                          on_round=lambda *_: bar.update(1))
+    metrics = {}
+    for n in eval_views:
+      model = trainer.final_model(selected[:n], seed)
+      metrics[n] = evaluate_model(model, pool, config, lpips_fn,
+                                  trainer.settings.get("final"))
+      bar.update(1)
+    record = run_record(strategy, seed, selected, metrics, time.perf_counter() - t_run, pool)
+    _write_json(path, record)
+    records.append(record)
+  bar.close()
+
+  summary = summarise(records, eval_views)
+  title = (f"Active camera planning on `{pool.name}`: {len(config.seeds)} seed(s), "
+           f"mean ± std over seeds.")
+  table = table_markdown(summary, eval_views, title=title)
+  with open(os.path.join(workdir, "table.md"), "w") as f:
+    f.write(table)
+  fig_seconds = 0.0
+  if config.figures.enabled:
+    t0 = time.perf_counter()
+    figures.camera_figure(records, pool, os.path.join(workdir, "cameras.png"),
+                          seed=int(config.seeds[0]))
+    land = landscape(config, pool, trainer, budgets)
+    np.savez(os.path.join(workdir, "landscape.npz"), **land)
+    figures.landscape_figure(land, os.path.join(workdir, "landscape.png"))
+    fig_seconds = time.perf_counter() - t0
+  results = {
+      "scene": pool.name, "seeds": list(config.seeds), "strategies": names,
+      "skipped_strategies": skipped, "eval_views": list(eval_views),
+      "resolution": [int(pool.candidates.images.shape[2]),
+                     int(pool.candidates.images.shape[1])],
+      "num_candidates": len(pool.candidates), "num_test": len(pool.test),
+      "round_steps": int(config.round_train.train.num_steps),
+      "final_steps": int(config.final_train.train.num_steps),
+      "summary": summary, "runs": records,
+      "seconds": {"total_this_call": time.perf_counter() - t_start, "pool": pool_seconds,
+                  "figures": fig_seconds},
+  }
+  _write_json(os.path.join(workdir, "results.json"), results)
+  return results
+
+
+def landscape(config, pool: Pool, trainer: Trainer, budgets):
+  """U over a latitude-longitude grid of cameras (paper Fig. 7) for the 1-view model.
+
+  The model is the first round's stochastic model of the first seed (one training view);
+  an optimisation from a random start (Ours (Opt. Rnd.)'s first step) is traced on top.
+
+  Returns:
+    dict of arrays: values [nv, nu], u [nu], v [nv], train_uv [1, 2], and (when enabled)
+    trajectory [steps + 1, 2].
+  """
+  seed = int(config.seeds[0])
+  cands = pool.candidates
+  first = initial_index(config, seed, len(cands))
+  sel = [Selected(first, cands.cameras[first], np.asarray(cands.images[first]), float("nan"),
+                  0.0, {})]
+  model = trainer.round_model("stochastic", sel, seed)
+  f = config.figures
+  down = int(config.strategy.optimize.downscale)
+  sphere = pool.sphere.replace(width=max(pool.sphere.width // down, 1),
+                               height=max(pool.sphere.height // down, 1))
+  grid, u, v = poses.uv_grid(sphere, int(f.landscape_u), int(f.landscape_v))
+  cams = poses.spherical_camera(jnp.asarray(grid.reshape(-1, 2)), sphere)
+  z = unc.uncertainty_z(model, int(config.strategy.ours.select_samples),
+                        int(config.strategy.ours.z_seed))
+  scores, budgets["landscape"] = unc.score_cameras(
+      model, cams, z, settings=budgets.get("landscape") or budgets.get("score")
+      or trainer.settings.get(("round", "stochastic")),
+      background=jnp.asarray(pool.background))
+  out = {"values": np.asarray(scores.values).reshape(grid.shape[:2]), "u": u, "v": v,
+         "train_uv": poses.camera_to_uv(sel[0].camera, pool.sphere.center)[None],
+         "candidates_uv": poses.camera_to_uv(cands.cameras, pool.sphere.center)}
+  if f.landscape_trajectory and pool.oracle is not None:
+    strategy = strategies.make_strategy("ours_opt_rnd", config)
+    inputs = strategies.Inputs(model, stack_cameras([sel[0].camera]), cands.cameras,
+                               np.ones(len(cands), bool), pool.sphere, pool.bounds,
+                               pool.background, dict(budgets))
+    key = jax.random.fold_in(jax.random.PRNGKey(seed), 1234)
+    choice = strategy.select(inputs, key)
+    out["trajectory"] = choice.info["trajectory"]
+    out["trajectory_values"] = choice.info["values"]
+  return out

@@ -1,0 +1,125 @@
+"""A thin adapter over `mfsample.train` for the planning protocol.
+
+The protocol trains a fresh model after every added view (METHOD.md Sec. 3). Calling
+`mfsample.train.train` on 1, 2, ..., 9 views would compile the jitted training step nine
+times per model kind, because the step takes the stacked training images as an argument
+and their leading axis grows. `train_on_views` instead pads the images to a fixed number
+of slots (`pad_to`) and draws the step's view only among the real ones, with the training
+code's own `view_for_step`, so one compilation serves every round. Everything else (set-up,
+initial state, the jitted step, budget growth on overflow) is the training module's.
+
+For the same reason the config must fix what would otherwise change with the views and
+sits in the step's static settings: `data.extent` and `loss.volume_weight` (the authors
+use 1 / number of views; the planning configs state the constant they use instead).
+Rounds run without densification (`densify.start >= train.num_steps`); the final models
+(`train_final`) use `mfsample.train.train` itself, densification included.
+"""
+
+import dataclasses
+import time
+from typing import NamedTuple
+
+import jax.numpy as jnp
+import numpy as np
+
+from mfsample.render.budget import BudgetExceededError, fit_budget
+from mfsample.train import init_state, make_setup, make_train_step, train
+from mfsample.train.loop import view_for_step
+
+
+class Trained(NamedTuple):
+  """A trained model.
+
+  Attributes:
+    model: `mfsample.model.Model`.
+    settings: `RenderSettings` whose budget sufficed (reuse it to avoid regrowth).
+    seconds: wall-clock of the training loop (compilation included).
+    loss: the last step's data loss.
+  """
+
+  model: object
+  settings: object
+  seconds: float
+  loss: float
+
+
+def _with_seed(config, seed):
+  config = config.copy_and_resolve_references()
+  with config.unlocked():
+    config.seed = int(seed)
+    config.train.progress = False
+  return config
+
+
+def _box(bounds):
+  low, high = bounds
+  return np.broadcast_to(np.asarray(low, np.float64), (3,)), np.broadcast_to(
+      np.asarray(high, np.float64), (3,))
+
+
+def train_on_views(config, views, *, seed, bounds, pad_to, settings=None) -> Trained:
+  """Trains a fresh model on `views` for `config.train.num_steps` steps (no densification).
+
+  Args:
+    config: a training config (`configs/train_default.py` layout) with `data.extent` and
+      `loss.volume_weight` set (see the module docstring).
+    views: the training `Views` (1 <= len(views) <= pad_to).
+    seed: seeds the initial point cloud, B_hat signs, the z sequence and the view order.
+    bounds: (low, high) box of the random initial point cloud.
+    pad_to: number of image slots of the jitted step (the protocol's maximum views).
+    settings: optional `RenderSettings` to start from (a budget that sufficed before).
+
+  Returns:
+    `Trained`.
+  """
+  config = _with_seed(config, seed)
+  n = len(views)
+  if not 1 <= n <= pad_to:
+    raise ValueError(f"need 1 <= len(views) <= pad_to, got {n} views and pad_to={pad_to}")
+  if config.data.get("extent") is None or config.loss.volume_weight is None:
+    raise ValueError("train_on_views needs config.data.extent and config.loss.volume_weight "
+                     "set: otherwise the jitted step recompiles for every view count")
+  if config.densify.start < config.train.num_steps:
+    raise ValueError("planning rounds run without densification: set densify.start >= "
+                     "train.num_steps (or use train_final)")
+  setup = make_setup(config, views)
+  if settings is not None:
+    setup = setup._replace(step_config=dataclasses.replace(setup.step_config,
+                                                           settings=settings))
+  state = init_state(config, setup, _box(bounds))
+  slots = np.minimum(np.arange(pad_to), n - 1)  # padding repeats the last view, never drawn
+  images = jnp.asarray(np.asarray(views.images)[slots], jnp.float32)
+  cameras = views.cameras[slots]
+  m = setup.step_config.num_samples
+  step_fn = make_train_step(setup.step_config)
+  start = time.perf_counter()
+  step, loss = 0, float("nan")
+  while step < setup.num_steps:
+    view = jnp.int32(view_for_step(config.seed, step, n))
+    rows = setup.sobol[step * m:(step + 1) * m]
+    new_state, metrics = step_fn(state, images, cameras, view, rows)
+    if bool(metrics.overflow):  # the step left the state untouched: grow and redo it
+      grown = fit_budget(setup.step_config.settings, metrics)
+      if grown.max_intersections > config.render.max_budget:
+        raise BudgetExceededError(f"training needs {int(metrics.num_padded)} intersections, "
+                                  f"more than config.render.max_budget")
+      setup = setup._replace(step_config=dataclasses.replace(setup.step_config,
+                                                             settings=grown))
+      step_fn = make_train_step(setup.step_config)
+      continue
+    state, step = new_state, step + 1
+    loss = metrics.data_loss
+  loss = float(loss)
+  return Trained(state.model, setup.step_config.settings, time.perf_counter() - start, loss)
+
+
+def train_final(config, views, *, seed, bounds, settings=None) -> Trained:
+  """Trains the final (plain) model on `views` with `mfsample.train.train` as it is."""
+  config = _with_seed(config, seed)
+  setup = make_setup(config, views)
+  if settings is not None:
+    setup = setup._replace(step_config=dataclasses.replace(setup.step_config,
+                                                           settings=settings))
+  result = train(config, views, setup=setup, bounds=_box(bounds))
+  loss = result.history[-1]["data_loss"] if result.history else float("nan")
+  return Trained(result.state.model, result.setup.step_config.settings, result.seconds, loss)

@@ -1,0 +1,237 @@
+"""Differentiable uncertainty of a stochastic Gaussian field (paper Eq. 10-11).
+
+For a camera and M samples theta(z_1) .. theta(z_M) of the field (`mfsample.samplers`),
+
+  U = sum over pixels p of (1/M) sum_m || C_m(p) - C_mean(p) ||^2,
+  C_mean(p) = (1/M) sum_m C_m(p),                                          (Eq. 10, 11)
+
+the biased (1/M) sample variance of the rendered colour, summed over RGB and pixels. The
+per-pixel term is the uncertainty image. U needs only forward renders, so it is
+differentiable w.r.t. the camera (pose and intrinsics) through the renderer. The paper uses
+M = 2 scrambled Sobol points (nearly antithetic) for optimisation; more for selection is a
+config choice. A deterministic model renders M identical images: U = 0 exactly.
+
+Batches of candidate cameras are scored by `score_cameras`: `jax.lax.map` over chunks of
+cameras (memory bounded by one chunk of M renders) and, with several devices, a
+`jax.shard_map` that splits the cameras over them (`map_cameras`).
+"""
+
+import functools
+import math
+from typing import NamedTuple
+
+import chex
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.sharding import PartitionSpec
+
+from mfsample import samplers
+from mfsample.camera import Camera
+from mfsample.render import TileStats, render
+from mfsample.render.budget import BudgetExceededError, fit_budget
+from mfsample.render.settings import RenderSettings
+
+
+class Uncertainty(NamedTuple):
+  """U of one camera.
+
+  Attributes:
+    value: scalar U (Eq. 10), summed over pixels and RGB.
+    pixel_map: [H, W] per-pixel variance over the samples, summed over RGB.
+    rgb_mean: [H, W, 3] mean render over the samples.
+    stats: `TileStats` with a leading [M] axis (check `overflow`).
+  """
+
+  value: chex.Array
+  pixel_map: chex.Array
+  rgb_mean: chex.Array
+  stats: TileStats
+
+
+def pixel_variance(rgbs):
+  """[M, H, W, C] renders -> [H, W]: (1/M) sum_m ||C_m - C_mean||^2 per pixel (Eq. 10)."""
+  mean = jnp.mean(rgbs, axis=0, keepdims=True)
+  return jnp.mean(jnp.sum(jnp.square(rgbs - mean), axis=-1), axis=0)
+
+
+def sample_gaussians(model, z):
+  """`Gaussians` of the M realisations theta(z_m), stacked on a leading [M] axis.
+
+  Args:
+    model: a `mfsample.model.Model`.
+    z: [M, *samplers.z_shape(model)].
+  """
+  return jax.vmap(lambda zi: samplers.sample(model, zi))(z)
+
+
+def uncertainty_z(model, num_samples, seed=0):
+  """[M, *z_shape] samples for U: the first M scrambled Sobol points (low rank; paper Sec.
+  4.4) or seeded uniforms (diagonal, block); zero-size for a deterministic model."""
+  rows = None
+  if model.spec.kind == "lowrank" and model.spec.stochastic:
+    rows = samplers.sobol_z(num_samples, model.spec.rank, seed)
+  return samplers.draw_z(model, num_samples, jax.random.PRNGKey(seed), rows)
+
+
+def uncertainty_of_samples(gaussians_m, camera: Camera, *, settings: RenderSettings,
+                           background) -> Uncertainty:
+  """U of `camera` for M sampled `Gaussians` (leading [M] axis on every leaf).
+
+  The samples are rendered one after another (`lax.map`): unvmapped, each render skips the
+  unused part of its intersection budget, and memory holds one render at a time.
+  """
+  def one(g):
+    out = render(g, camera, background=background, settings=settings)
+    return out.rgb, out.stats
+
+  rgbs, stats = jax.lax.map(one, gaussians_m)
+  pmap = pixel_variance(rgbs)
+  return Uncertainty(value=jnp.sum(pmap), pixel_map=pmap, rgb_mean=jnp.mean(rgbs, axis=0),
+                     stats=stats)
+
+
+@functools.partial(jax.jit, static_argnames=("settings",))
+def uncertainty(model, camera: Camera, z, *, settings: RenderSettings = RenderSettings(),
+                background=None) -> Uncertainty:
+  """U of a stochastic model seen from one camera (Eq. 10), and its per-pixel map.
+
+  Differentiable w.r.t. the camera (and the model): e.g.
+  `jax.grad(lambda c: uncertainty(model, c, z, settings=s).value)(camera)`.
+
+  Args:
+    model: `mfsample.model.Model` (any sampler kind; deterministic gives U = 0).
+    camera: one unbatched `Camera`.
+    z: [M, *samplers.z_shape(model)] samples, e.g. `uncertainty_z(model, 2)`.
+    settings: `RenderSettings` (static). Check `stats.overflow`: an overflowing render is
+      incomplete; grow the budget (`mfsample.render.budget.fit_budget`) and call again.
+    background: [3] colour behind the Gaussians (default black).
+
+  Returns:
+    `Uncertainty`.
+  """
+  if background is None:
+    background = jnp.zeros((3,), model.params.mean["means"].dtype)
+  return uncertainty_of_samples(sample_gaussians(model, z), camera, settings=settings,
+                                background=background)
+
+
+# ------------------------------------------------------------------ batches of cameras
+
+
+def map_cameras(fn, cameras: Camera, *args, chunk_size=1, num_devices=1):
+  """fn(camera, *args) for every camera of a batch; call inside `jax.jit`.
+
+  Cameras are processed `chunk_size` at a time (`jax.lax.map` with a vmapped chunk), so
+  memory holds one chunk. With `num_devices` > 1 the cameras are split over the first
+  `num_devices` devices with `jax.shard_map` (args replicated) and each device maps over its
+  share. The batch is padded with copies of its last camera to a multiple of
+  num_devices * chunk_size; the padding is dropped from the result.
+
+  Under vmap (chunk_size > 1) the renderer cannot skip unused budget, so chunk_size = 1 is
+  the cheaper choice on a CPU; larger chunks pay off on accelerators.
+
+  Args:
+    fn: (unbatched Camera, *args) -> pytree of arrays.
+    cameras: `Camera` batched over one axis [B].
+    *args: replicated arguments (pytrees).
+    chunk_size: cameras vmapped together.
+    num_devices: devices to shard the cameras over (static).
+
+  Returns:
+    fn's pytree with a leading [B] axis.
+  """
+  if len(cameras.batch_shape) != 1:
+    raise ValueError(f"map_cameras takes a Camera batched over one axis, got "
+                     f"{cameras.batch_shape}")
+  b = cameras.batch_shape[0]
+  per_device = chunk_size * math.ceil(b / (num_devices * chunk_size))
+  total = per_device * num_devices
+  if total != b:
+    idx = jnp.minimum(jnp.arange(total), b - 1)
+    cameras = jax.tree.map(lambda x: x[idx], cameras)
+
+  def local(cams, *a):
+    # batch_size=1 would still vmap (over a unit axis) and lose the renderer's skipping.
+    batch = None if chunk_size == 1 else chunk_size
+    return jax.lax.map(lambda c: fn(c, *a), cams, batch_size=batch)
+
+  if num_devices == 1:
+    out = local(cameras, *args)
+  else:
+    mesh = jax.make_mesh((num_devices,), ("cams",), devices=jax.devices()[:num_devices])
+    replicated = tuple(jax.tree.map(lambda _: PartitionSpec(), a) for a in args)
+    out = jax.shard_map(local, mesh=mesh, in_specs=(PartitionSpec("cams"),) + replicated,
+                        out_specs=PartitionSpec("cams"), check_vma=False)(cameras, *args)
+  return jax.tree.map(lambda x: x[:b], out)
+
+
+class CameraScores(NamedTuple):
+  """U of a batch of cameras.
+
+  Attributes:
+    values: [B] U per camera.
+    pixel_maps: [B, H, W] per-pixel maps, or None when not requested.
+    stats: `TileStats` [B, M].
+  """
+
+  values: chex.Array
+  pixel_maps: chex.Array | None
+  stats: TileStats
+
+
+@functools.partial(jax.jit, static_argnames=("settings", "chunk_size", "num_devices",
+                                             "with_maps"))
+def _score(model, cameras, z, background, *, settings, chunk_size, num_devices, with_maps):
+  gaussians_m = sample_gaussians(model, z)  # sampled once, shared by every camera
+
+  def one(camera, g):
+    u = uncertainty_of_samples(g, camera, settings=settings, background=background)
+    return u.value, (u.pixel_map if with_maps else None), u.stats
+
+  values, maps, stats = map_cameras(one, cameras, gaussians_m, chunk_size=chunk_size,
+                                    num_devices=num_devices)
+  return CameraScores(values, maps, stats)
+
+
+def default_num_devices(num_items):
+  """Devices to shard over: all of them, but not more than there are items."""
+  return max(1, min(jax.device_count(), int(num_items)))
+
+
+def score_cameras(model, cameras: Camera, z, *, settings: RenderSettings, background=None,
+                  chunk_size=1, num_devices=None, with_maps=False, max_budget=1 << 24):
+  """U (Eq. 10) of every camera of a batch: the candidate scorer of Ours (Sel.).
+
+  Grows the intersection budget until no render overflows (never reports a truncated
+  image), like `mfsample.render.budget.render_with_budget`.
+
+  Args:
+    model: `mfsample.model.Model`.
+    cameras: `Camera` batched over [B].
+    z: [M, *z_shape] samples (`uncertainty_z`).
+    settings: starting `RenderSettings`.
+    background: [3] colour (default black).
+    chunk_size: cameras vmapped together (see `map_cameras`).
+    num_devices: devices to shard the cameras over (default: all available, at most B).
+    with_maps: also return the [B, H, W] per-pixel maps.
+    max_budget: refuse to grow the budget beyond this (BudgetExceededError).
+
+  Returns:
+    (`CameraScores`, the settings that sufficed).
+  """
+  if background is None:
+    background = jnp.zeros((3,), model.params.mean["means"].dtype)
+  background = jnp.asarray(background, model.params.mean["means"].dtype)
+  if num_devices is None:
+    num_devices = default_num_devices(cameras.batch_shape[0])
+  while True:
+    out = _score(model, cameras, z, background, settings=settings, chunk_size=chunk_size,
+                 num_devices=num_devices, with_maps=with_maps)
+    if not bool(np.any(np.asarray(out.stats.overflow))):
+      return out, settings
+    grown = fit_budget(settings, out.stats)
+    if grown.max_intersections > max_budget:
+      raise BudgetExceededError(f"scoring needs more than max_budget={max_budget} "
+                                "intersections")
+    settings = grown

@@ -1,0 +1,67 @@
+"""Shared pieces of the uncertainty and planning tests (tiny sizes, built once per session).
+
+The tests build everything from `configs/camera_planning_tiny.py`, so that equal training
+configs share one compilation of the jitted training step (it is jitted module-wide with its
+settings static), and the expensive objects are cached here for the whole session.
+"""
+
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from mfsample.model import GROUPS, SamplerSpec, init_model
+
+from configs import camera_planning_tiny
+from mfsample.planning import poses, training
+from mfsample.planning.pool import make_pool
+
+BOUNDS = tuple((g, b) for g, b in zip(GROUPS, (1.0, 20.0, 2.0, 20.0, 0.5, 0.5), strict=True))
+
+
+def tiny_config():
+  return camera_planning_tiny.get_config()
+
+
+@functools.cache
+def tiny_pool():
+  """The synthetic pool of the tiny config (8 candidates, 2 test views, 24 x 24)."""
+  return make_pool(tiny_config().data)
+
+
+def random_model(kind="lowrank", *, num=80, spread=0.05, seed=0, dtype=jnp.float32,
+                 sh_degree=0, radius=0.5):
+  """An untrained model: `num` Gaussians in [-radius, radius]^3 with B_hat entries of size
+  ~`spread` (so that U > 0 without training)."""
+  rng = np.random.default_rng(seed)
+  points = rng.uniform(-radius, radius, (num, 3))
+  spec = SamplerSpec(kind=kind, rank=2, groups=GROUPS if kind != "deterministic" else (),
+                     bounds=BOUNDS)
+  scales = {g: spread for g in GROUPS}
+  return init_model(jax.random.PRNGKey(seed), points, spec=spec, sh_degree=sh_degree,
+                    init_scales=scales, init_opacity=0.6,
+                    colors=rng.uniform(0.1, 0.9, (num, 3)), dtype=dtype)
+
+
+@functools.cache
+def trained_one_view(kind="lowrank", view=0):
+  """A model of the tiny config's round training, trained on candidate `view` alone."""
+  config = tiny_config()
+  pool = tiny_pool()
+  cfg = config.round_train.copy_and_resolve_references()
+  with cfg.unlocked():
+    cfg.sampler.kind = kind
+  return training.train_on_views(cfg, pool.candidates.subset([view]), seed=0,
+                                 bounds=pool.bounds, pad_to=config.max_views)
+
+
+def opposite_uv(uv):
+  """(u, v) of the diametrically opposite point of the sphere."""
+  return np.array([(uv[0] + 0.5) % 1.0, 1.0 - uv[1]])
+
+
+def sphere_for(pool, v_range=(0.0, 1.0)):
+  return pool.sphere.replace(v_range=v_range)
+
+
+__all__ = ["poses", "random_model", "tiny_config", "tiny_pool", "trained_one_view"]

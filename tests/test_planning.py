@@ -1,0 +1,254 @@
+"""Camera parameterisations, the strategies, the optimiser, and the protocol end to end."""
+
+import json
+import math
+import os
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+import scipy.linalg
+from planning_testlib import random_model, tiny_config, tiny_pool, trained_one_view
+
+from mfsample import RenderSettings
+from mfsample import uncertainty as unc
+from mfsample.planning import acp, fisher, optimize, poses, runner, strategies, variance
+from mfsample.planning.pool import stack_cameras
+from mfsample.scenes import get_scene
+
+# ------------------------------------------------------------------ poses
+
+
+def test_spherical_camera_matches_the_scene_convention():
+  scene = get_scene("default")
+  sphere = poses.SphereSpec.from_scene(scene, 32, 24)
+  assert sphere.v_range == pytest.approx((0.01, 0.46))
+  az, polar = 1.1, 0.7
+  ours = poses.spherical_camera(jnp.asarray([az / (2 * math.pi), polar / math.pi]), sphere)
+  ref = scene.camera_at(az, polar, 32, 24)
+  np.testing.assert_allclose(ours.world_to_camera, ref.world_to_camera, atol=1e-5)
+  np.testing.assert_allclose(ours.fx, ref.fx, rtol=1e-6)
+  np.testing.assert_allclose(poses.camera_to_uv(ours), [az / (2 * math.pi), polar / math.pi],
+                             atol=1e-5)
+
+
+def test_project_uv_wraps_azimuth_and_clamps_polar():
+  sphere = poses.SphereSpec(v_range=(0.01, 0.46))
+  out = np.asarray(poses.project_uv(jnp.asarray([[1.25, 0.7], [-0.25, -0.1]]), sphere))
+  np.testing.assert_allclose(out, [[0.25, 0.46], [0.75, 0.01]], atol=1e-6)
+
+
+def test_random_uv_stays_in_the_band_and_grid_covers_it():
+  sphere = poses.SphereSpec(v_range=(0.1, 0.4))
+  uv = poses.random_uv(np.random.default_rng(0), 500, sphere)
+  assert np.all((uv[:, 1] >= 0.1) & (uv[:, 1] <= 0.4) & (uv[:, 0] >= 0) & (uv[:, 0] < 1))
+  grid, u, v = poses.uv_grid(sphere, 6, 4)
+  assert grid.shape == (4, 6, 2) and v[0] == pytest.approx(0.1) and v[-1] == pytest.approx(0.4)
+
+
+def test_se3_exp_matches_the_matrix_exponential():
+  with jax.enable_x64(True):
+    rng = np.random.default_rng(0)
+    for scale in (1e-7, 1e-3, 0.5, 2.0):
+      xi = rng.normal(size=6) * scale
+      twist = np.zeros((4, 4))
+      twist[:3, :3] = np.asarray(poses.hat(jnp.asarray(xi[:3])))
+      twist[:3, 3] = xi[3:]
+      np.testing.assert_allclose(poses.se3_exp(jnp.asarray(xi)), scipy.linalg.expm(twist),
+                                 atol=1e-12, rtol=1e-10)
+    # Finite gradient at the identity, where the closed form is 0 / 0.
+    g = jax.grad(lambda x: jnp.sum(poses.se3_exp(x) ** 2))(jnp.zeros(6))
+    assert np.all(np.isfinite(np.asarray(g)))
+
+
+def test_perturb_camera_moves_in_the_camera_frame():
+  cam = poses.spherical_camera(jnp.asarray([0.3, 0.3]), poses.SphereSpec())
+  same = poses.perturb_camera(cam, jnp.zeros(6))
+  np.testing.assert_allclose(same.world_to_camera, cam.world_to_camera, atol=1e-6)
+  # A translation of +1 along the camera's z axis (forward) moves the centre forward by 1.
+  moved = poses.perturb_camera(cam, jnp.asarray([0, 0, 0, 0, 0, -1.0]))
+  forward = np.asarray(cam.rotation)[2]
+  np.testing.assert_allclose(np.asarray(moved.center) - np.asarray(cam.center), forward,
+                             atol=1e-5)
+
+
+def test_downscale_camera_keeps_relative_projection():
+  cam = poses.spherical_camera(jnp.asarray([0.3, 0.3]), poses.SphereSpec(width=64, height=48))
+  small = poses.downscale_camera(cam, 2)
+  assert (small.width, small.height) == (32, 24)
+  pts = jnp.asarray([[0.1, 0.2, 0.0], [0.3, -0.2, 0.1]])
+  np.testing.assert_allclose(np.asarray(small.project(pts)[0]) * 2, cam.project(pts)[0],
+                             rtol=1e-5)
+
+
+# ------------------------------------------------------------------ FisherRF
+
+
+def test_fisher_probe_estimator_is_unbiased():
+  # A 2 x 1 image has 6 outputs: averaging over all 2^6 Rademacher sign vectors is the exact
+  # expectation, which must equal diag(J^T J) from the full Jacobian.
+  with jax.enable_x64(True):
+    m = random_model("deterministic", num=6, dtype=jnp.float64, radius=0.05, seed=1)
+    sphere = poses.SphereSpec(radius=3.0, width=2, height=1, fov_x=0.05)
+    cam = poses.spherical_camera(jnp.asarray([0.1, 0.3], jnp.float64), sphere)
+    s = RenderSettings(max_intersections=512, chunk_size=32, chunks_per_step=16)
+    bg = jnp.asarray([0.2, 0.3, 0.4])
+    exact = fisher.fisher_diagonal_exact(m, cam, settings=s, background=bg)
+    signs = np.array([[1.0 if (i >> b) & 1 else -1.0 for b in range(6)] for i in range(64)])
+    diff, image = fisher._image_fn(m, cam, bg, s, fisher.DEFAULT_GROUPS)
+    rgb, vjp, _ = jax.vjp(image, diff, has_aux=True)
+    est = jax.tree.map(jnp.zeros_like, exact)
+    for v in signs:
+      g = vjp(jnp.asarray(v.reshape(rgb.shape)))[0]
+      est = jax.tree.map(lambda e, x: e + x * x / 64.0, est, g)
+    total = sum(float(jnp.sum(x)) for x in jax.tree.leaves(exact))
+    assert total > 0.0
+    for k in exact:
+      np.testing.assert_allclose(est[k], exact[k], rtol=1e-9, atol=1e-12 * total)
+    # The sampled estimator converges to it too.
+    many, _ = fisher.fisher_diagonal(m, cam, jax.random.PRNGKey(0), num_probes=2000,
+                                     settings=s, background=bg)
+    a = np.concatenate([np.ravel(many[k]) for k in exact])
+    b = np.concatenate([np.ravel(exact[k]) for k in exact])
+    assert np.sum(np.abs(a - b)) < 0.1 * np.sum(b)
+
+
+# ------------------------------------------------------------------ ACP
+
+
+def test_acp_gains_are_differences_of_the_score():
+  pool = tiny_pool()
+  dirs = acp.fibonacci_directions(16)
+  pts = acp.grid_points(*pool.bounds, resolution=8)
+  cams = pool.candidates.cameras
+  obs = acp.observe(cams, pts, dirs)
+  train = acp.Observations(obs.visible[:2], obs.bins[:2])
+  gains = acp.acp_gains(train, obs, 16, weight=0.5)
+  for c in (2, 5):
+    both = acp.Observations(obs.visible[[0, 1, c]], obs.bins[[0, 1, c]])
+    assert gains[c] == pytest.approx(acp.acp_value(both, 16, 0.5) - acp.acp_value(train, 16,
+                                                                                     0.5))
+  assert gains[0] == pytest.approx(0.0)  # a training camera adds nothing
+
+
+# ------------------------------------------------------------------ strategies
+
+
+@pytest.fixture(scope="module")
+def models():
+  pool = tiny_pool()
+  stoch = trained_one_view("lowrank")
+  det = trained_one_view("deterministic")
+  vmodel, losses = variance.fit_variance(det.model, pool.candidates.subset([0]),
+                                         settings=det.settings, background=pool.background,
+                                         steps=4)
+  assert np.all(np.isfinite(losses))
+  return {"stochastic": stoch.model, "deterministic": det.model, "variance": vmodel,
+          None: None}
+
+
+def _valid_camera(camera, sphere):
+  w2c = np.asarray(camera.world_to_camera)
+  assert camera.batch_shape == () and w2c.shape == (4, 4) and np.all(np.isfinite(w2c))
+  np.testing.assert_allclose(w2c[:3, :3] @ w2c[:3, :3].T, np.eye(3), atol=1e-4)
+  assert (camera.width, camera.height) == (sphere.width, sphere.height)
+
+
+@pytest.mark.parametrize("name", strategies.NAMES)
+def test_every_strategy_returns_a_valid_camera(name, models):
+  pool = tiny_pool()
+  config = tiny_config()
+  strategy = strategies.make_strategy(name, config)
+  available = np.ones(len(pool.candidates), bool)
+  available[[0, 3]] = False
+  inputs = strategies.Inputs(models[strategy.model_kind], stack_cameras(
+      [pool.candidates.cameras[0], pool.candidates.cameras[3]]), pool.candidates.cameras,
+      available, pool.sphere, pool.bounds, pool.background, {})
+  choice = strategy.select(inputs, jax.random.PRNGKey(1))
+  _valid_camera(choice.camera, pool.sphere)
+  assert np.isfinite(choice.score)
+  if strategy.new_poses:
+    assert choice.index is None
+    uv = poses.camera_to_uv(choice.camera, pool.sphere.center)
+    lo, hi = pool.sphere.v_range
+    assert lo - 1e-4 <= uv[1] <= hi + 1e-4
+    dist = np.linalg.norm(np.asarray(choice.camera.center) - np.asarray(pool.sphere.center))
+    assert dist == pytest.approx(pool.sphere.radius, rel=1e-4)
+  else:
+    assert choice.index in np.nonzero(available)[0]
+    np.testing.assert_allclose(choice.camera.world_to_camera,
+                               pool.candidates.cameras[choice.index].world_to_camera)
+
+
+def test_farthest_point_picks_the_farthest_candidate():
+  pool = tiny_pool()
+  strategy = strategies.make_strategy("farthest", tiny_config())
+  inputs = strategies.Inputs(None, stack_cameras([pool.candidates.cameras[0]]),
+                             pool.candidates.cameras, np.arange(8) != 0, pool.sphere,
+                             pool.bounds, pool.background, {})
+  choice = strategy.select(inputs, jax.random.PRNGKey(0))
+  d = np.linalg.norm(np.asarray(pool.candidates.cameras.center)
+                     - np.asarray(pool.candidates.cameras.center)[0], axis=-1)
+  assert choice.index == int(np.argmax(d))
+
+
+def test_optimisation_increases_uncertainty_and_respects_the_band(models):
+  pool = tiny_pool()
+  model = models["stochastic"]
+  z = unc.uncertainty_z(model, 2, seed=6174)
+  sphere = pool.sphere.replace(width=12, height=12)
+  opt = optimize.OptimizeSettings(steps=30, lr=1e-2, z_drop_step=20, z_drop_scale=0.1)
+  uv0 = poses.camera_to_uv(pool.candidates.cameras[0])  # the training view: low U
+  out = optimize.optimize_spherical(model, uv0, z, sphere=sphere, opt=opt,
+                                    settings=RenderSettings(max_intersections=1 << 11))
+  values = np.asarray(out.values)
+  assert values.shape == (30,) and out.trajectory.shape == (31, 2)
+  assert np.mean(values[15:20]) > values[0]  # before the z drop, which rescales U
+  traj = np.asarray(out.trajectory)
+  assert np.all((traj[:, 1] >= sphere.v_range[0] - 1e-6) & (traj[:, 1] <= sphere.v_range[1]
+                                                             + 1e-6))
+  # The 6-DoF variant runs and moves the camera.
+  se3 = optimize.optimize_se3(model, poses.spherical_camera(out.params, sphere), z,
+                              opt=optimize.OptimizeSettings(steps=3, z_drop_step=2),
+                              settings=out.settings)
+  assert np.all(np.isfinite(np.asarray(se3.params))) and np.any(np.asarray(se3.params) != 0)
+
+
+# ------------------------------------------------------------------ the protocol
+
+
+def test_protocol_runs_end_to_end_and_resumes(tmp_path):
+  config = tiny_config()
+  config.strategies = ("random", "ours_sel", "ours_opt_rnd")
+  results = runner.run_camera_planning(config, str(tmp_path))
+  for name in ("results.json", "table.md", "cameras.png", "landscape.png", "landscape.npz"):
+    assert (tmp_path / name).exists(), name
+  assert set(results["summary"]) == set(config.strategies)
+  for rec in results["runs"]:
+    assert len(rec["indices"]) == config.max_views
+    assert set(rec["metrics"]) == {"2", "3"}
+    assert all(np.isfinite(rec["metrics"]["3"][k]) for k in ("psnr", "ssim"))
+    if rec["strategy"] == "ours_opt_rnd":
+      assert rec["indices"][1:] == [None, None]  # captured new poses
+    else:
+      assert len(set(rec["indices"])) == config.max_views  # no candidate twice
+  table = (tmp_path / "table.md").read_text()
+  assert "Ours (Sel.)" in table and "PSNR↑ (3 views)" in table
+  # A killed run resumes: finished (strategy, seed) runs are read back, not recomputed.
+  run_file = tmp_path / "runs" / "random-seed0.json"
+  stamp = os.path.getmtime(run_file)
+  again = runner.run_camera_planning(config, str(tmp_path))
+  assert os.path.getmtime(run_file) == stamp
+  assert json.loads(run_file.read_text())["indices"] == again["runs"][0]["indices"]
+
+
+def test_table_layout_has_mean_and_std():
+  records = [{"strategy": "ours_sel", "label": "Ours (Sel.)", "seed": s,
+              "metrics": {"5": {"psnr": 20.0 + s, "ssim": 0.8, "lpips": 0.1}}}
+             for s in (0, 1)]
+  summary = runner.summarise(records, (5,))
+  assert summary["ours_sel"]["5"]["psnr"]["mean"] == pytest.approx(20.5)
+  assert summary["ours_sel"]["5"]["psnr"]["std"] == pytest.approx(0.5)
+  table = runner.table_markdown(summary, (5,))
+  assert "| Ours (Sel.) | 20.50 ± 0.50 | 0.800 ± 0.000 | 0.100 ± 0.000 |" in table
