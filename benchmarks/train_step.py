@@ -1,0 +1,177 @@
+"""Milliseconds per training step of every sampler on one scene, and peak memory.
+
+Each variant runs in a fresh subprocess (so peak RSS is its own and compilation caches do
+not leak between variants): it builds the same initial state (lego at 200 x 200 with the
+lego config's random initial cloud, or a synthetic scene when lego is absent), compiles the
+step, runs `--warmup` steps, then times `--steps` steps (median). Variants are run in
+interleaved rounds and each ratio to deterministic is taken within a round, so a change in
+the machine's load between rounds does not bias the ratios. Densification is off: this
+measures the jitted step (paper Tab. 4 measures the same thing per iteration).
+
+  PYTHONPATH=. python benchmarks/train_step.py --rounds=2 --out=results/train_step.json
+"""
+
+import json
+import os
+import resource
+import statistics
+import subprocess
+import sys
+import time
+
+from absl import app, flags
+
+_VARIANTS = flags.DEFINE_list(
+    "variants", ["deterministic", "diagonal", "block", "rank1", "rank2", "rank4", "rank10"],
+    "Variants: deterministic, diagonal, block, rankK.")
+_ROUNDS = flags.DEFINE_integer("rounds", 2, "Interleaved rounds over all variants.")
+_STEPS = flags.DEFINE_integer("steps", 20, "Timed steps per variant and round.")
+_WARMUP = flags.DEFINE_integer("warmup", 3, "Untimed steps after compilation.")
+_SIZE = flags.DEFINE_integer("size", 200, "Image side in pixels (lego downscale 400/size).")
+_POINTS = flags.DEFINE_integer("points", 10_000, "Gaussians of the initial cloud.")
+_SAMPLES = flags.DEFINE_integer("samples", 1, "M, samples per step.")
+_DATA = flags.DEFINE_string("data", "/work/shared/data/lego",
+                            "NeRF Synthetic lego folder (synthetic scene if absent).")
+_OUT = flags.DEFINE_string("out", "results/train_step.json", "Output JSON.")
+_CHILD = flags.DEFINE_string("child", None, "Internal: run one variant and print JSON.")
+
+
+def _config(variant):
+  from configs import train_lego
+
+  config = train_lego.get_config()
+  if variant == "deterministic":
+    config.sampler.kind = "deterministic"
+  elif variant in ("diagonal", "block"):
+    config.sampler.kind = variant
+    config.sampler.rank = 2  # block: one rank-2 block per Gaussian (same size as rank 2)
+  elif variant.startswith("rank"):
+    config.sampler.kind = "lowrank"
+    config.sampler.rank = int(variant[4:])
+  else:
+    raise ValueError(f"unknown variant {variant}")
+  config.sampler.num_samples = _SAMPLES.value
+  config.model.init_points = _POINTS.value
+  config.data.path = _DATA.value
+  config.data.downscale = max(400 // _SIZE.value, 1)
+  config.densify.start = 10**9  # no densification: time the jitted step alone
+  config.train.progress = False
+  return config
+
+
+def _child(variant):
+  import jax
+  import jax.numpy as jnp
+  import numpy as np
+
+  from mfsample.train import data as data_lib
+  from mfsample.train import loop
+  from mfsample.train.step import make_train_step
+
+  config = _config(variant)
+  if not os.path.isdir(config.data.path):
+    config.data.kind = "synthetic"
+    config.data.init_bounds = (-0.8, 0.8)
+    syn = config.data.synthetic
+    syn.num_gaussians, syn.width, syn.height, syn.sh_degree = 2000, _SIZE.value, _SIZE.value, 3
+    syn.num_train, syn.num_test = 16, 1
+  dataset = data_lib.load_dataset(config.data)
+  views = data_lib.to_device(dataset.train)
+  setup = loop.make_setup(config, dataset.train)
+  state = loop.init_state(config, setup, dataset.bounds)
+  m = setup.step_config.num_samples
+  fn = make_train_step(setup.step_config)
+  # Grow the budget until no step of the warm-up overflows (as the loop does).
+  t0 = time.perf_counter()
+  step, times = 0, []
+  import dataclasses
+
+  from mfsample.render.budget import fit_budget
+  while step < _WARMUP.value + _STEPS.value:
+    view = jnp.int32(loop.view_for_step(0, step, len(views)))
+    rows = setup.sobol[step * m:(step + 1) * m]
+    t = time.perf_counter()
+    new_state, metrics = fn(state, views.images, views.cameras, view, rows)
+    jax.block_until_ready(new_state)
+    dt = time.perf_counter() - t
+    if bool(metrics.overflow):
+      settings = fit_budget(setup.step_config.settings, metrics)
+      setup = setup._replace(step_config=dataclasses.replace(setup.step_config,
+                                                             settings=settings))
+      fn = make_train_step(setup.step_config)
+      continue
+    state = new_state
+    if step >= _WARMUP.value:
+      times.append(dt)
+    step += 1
+  usage = resource.getrusage(resource.RUSAGE_SELF)
+  print(json.dumps({
+      "variant": variant, "ms_median": 1e3 * statistics.median(times),
+      "ms_min": 1e3 * min(times), "ms_all": [1e3 * t for t in times],
+      "peak_rss_mb": usage.ru_maxrss / 1024.0, "seconds_total": time.perf_counter() - t0,
+      "capacity": int(state.model.capacity), "live": int(np.sum(np.asarray(state.model.mask))),
+      "budget": setup.step_config.settings.max_intersections,
+      "params_per_gaussian": int(sum(np.prod(x.shape[1:]) for x in
+                                     jax.tree.leaves(state.model.params))),
+      "resolution": int(views.images.shape[1]),
+  }))
+
+
+def _load():
+  try:
+    return os.getloadavg()
+  except OSError:
+    return (float("nan"),) * 3
+
+
+def main(argv):
+  del argv
+  if _CHILD.value:
+    _child(_CHILD.value)
+    return
+  env = dict(os.environ, PYTHONPATH=os.pathsep.join([".", os.environ.get("PYTHONPATH", "")]))
+  passthrough = [f"--steps={_STEPS.value}", f"--warmup={_WARMUP.value}",
+                 f"--size={_SIZE.value}", f"--points={_POINTS.value}",
+                 f"--samples={_SAMPLES.value}", f"--data={_DATA.value}"]
+  rounds = []
+  for r in range(_ROUNDS.value):
+    results = {}
+    for variant in _VARIANTS.value:
+      load = _load()
+      out = subprocess.run([sys.executable, __file__, f"--child={variant}", *passthrough],
+                           env=env, capture_output=True, text=True, check=False)
+      if out.returncode:
+        raise RuntimeError(f"{variant} failed:\n{out.stderr[-3000:]}")
+      res = json.loads(out.stdout.strip().splitlines()[-1])
+      res["load_before"] = load
+      results[variant] = res
+      print(f"round {r} {variant:>13}: {res['ms_median']:8.1f} ms/step  "
+            f"peak {res['peak_rss_mb']:7.0f} MB  (load {load[0]:.2f})", flush=True)
+    rounds.append(results)
+
+  base = "deterministic"
+  table = {}
+  for variant in _VARIANTS.value:
+    ms = [r[variant]["ms_median"] for r in rounds]
+    row = {"ms_per_step": statistics.median(ms), "ms_rounds": ms,
+           "peak_rss_mb": max(r[variant]["peak_rss_mb"] for r in rounds),
+           "params_per_gaussian": rounds[0][variant]["params_per_gaussian"]}
+    if base in rounds[0]:
+      row["ratio"] = statistics.median(r[variant]["ms_median"] / r[base]["ms_median"]
+                                       for r in rounds)
+    table[variant] = row
+  print(f"\n{'variant':>13} | {'ms/step':>8} | {'ratio':>6} | {'peak RSS MB':>11} | params/G")
+  for variant, row in table.items():
+    print(f"{variant:>13} | {row['ms_per_step']:8.1f} | {row.get('ratio', float('nan')):6.3f} | "
+          f"{row['peak_rss_mb']:11.0f} | {row['params_per_gaussian']}")
+  os.makedirs(os.path.dirname(_OUT.value) or ".", exist_ok=True)
+  first = rounds[0][_VARIANTS.value[0]]
+  with open(_OUT.value, "w") as f:
+    json.dump({"table": table, "rounds": rounds, "resolution": first["resolution"],
+               "points": _POINTS.value, "samples": _SAMPLES.value, "steps": _STEPS.value,
+               "cpu_count": os.cpu_count(), "load_end": _load()}, f, indent=2)
+  print(f"saved {_OUT.value}")
+
+
+if __name__ == "__main__":
+  app.run(main)

@@ -1,0 +1,335 @@
+"""The stochastic Gaussian field: raw parameters, capacity and mask, the one activation.
+
+A model is a distribution over 3DGS parameters (paper Sec. 4.2, Eq. 7):
+
+  theta(z) = mean + B_hat z,   z ~ U[-1, 1]^k,
+
+held as *raw*, unconstrained arrays grouped by meaning (the 3DGS parameterisation: centres,
+log-scales, unnormalised quaternions, opacity logits, SH coefficients). The generating
+matrix B_hat is parameterised per group as relu(raw) * sign with a fixed random sign per
+entry (paper Sec. 4.3), so its columns point in diverse directions. Samples perturb the raw
+parameters; `activate` (the only place where constraints are applied) turns raw values into
+the renderer's `Gaussians`.
+
+Shapes are static: every array has a leading *capacity* axis C, and `mask` marks the live
+rows. Capacity grows on the host in buckets (`capacity_bucket`), never inside jit.
+
+Groups are a dict so that a later variant (a relightable field's transfer matrices) adds a
+group without touching the samplers: every group is an array [C, ...] and the samplers
+treat them alike.
+"""
+
+import dataclasses
+from typing import NamedTuple
+
+import chex
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from mfsample._pytree import pytree_dataclass, replace, static_field
+from mfsample.gaussians import Gaussians
+
+# Raw parameter groups in a fixed order (the order of a flattened per-Gaussian vector, e.g.
+# the diagonal sampler's z). `sh_rest` exists only when the model's SH degree is above 0.
+GROUPS = ("means", "log_scales", "quats", "opacity_logits", "sh_dc", "sh_rest")
+
+SAMPLER_KINDS = ("deterministic", "diagonal", "block", "lowrank")
+
+# Log-scales are clamped to this range before exp: far beyond any real Gaussian (e^10 world
+# units), it keeps samples finite even when B_hat sits at its bounds with many columns
+# (rank 64 x bound 20 would overflow float32's exp).
+LOG_SCALE_RANGE = (-30.0, 10.0)
+
+# Neutral values for padding rows: finite, and harmless even if a mask were dropped
+# (opacity sigmoid(-20) ~ 2e-9 is below any alpha threshold).
+_PAD_OPACITY_LOGIT = -20.0
+
+
+@dataclasses.dataclass(frozen=True)
+class SamplerSpec:
+  """Static description of the generator B_hat (hashable: part of the jit cache key).
+
+  Attributes:
+    kind: "deterministic" (no B_hat, plain 3DGS), "diagonal" (one independent uniform per
+      parameter entry), "block" (one block per Gaussian: k uniforms per Gaussian, so
+      Gaussians are independent and the entries of one Gaussian correlated) or "lowrank"
+      (k uniforms shared by the whole model; paper Eq. 7).
+    rank: k, columns of B_hat per entry (lowrank and block; ignored otherwise).
+    groups: the stochastic parameter groups (a subset of the model's groups); the others
+      are deterministic.
+    bounds: ((group, upper bound), ...): relu(raw) is kept in [0, bound] (authors' code:
+      raw entries are clamped after every step).
+  """
+
+  kind: str = "lowrank"
+  rank: int = 2
+  groups: tuple = ()
+  bounds: tuple = ()
+
+  def __post_init__(self):
+    if self.kind not in SAMPLER_KINDS:
+      raise ValueError(f"sampler kind must be one of {SAMPLER_KINDS}, got {self.kind!r}")
+    if self.kind in ("lowrank", "block") and self.rank < 1:
+      raise ValueError(f"rank must be >= 1 for the {self.kind} sampler, got {self.rank}")
+    unknown = set(self.groups) - set(GROUPS)
+    if unknown:
+      raise ValueError(f"unknown stochastic groups {sorted(unknown)}; known: {GROUPS}")
+    missing = set(self.groups) - {g for g, _ in self.bounds}
+    if self.kind != "deterministic" and missing:
+      raise ValueError(f"no bound given for stochastic groups {sorted(missing)}")
+
+  @property
+  def stochastic(self):
+    return self.kind != "deterministic" and bool(self.groups)
+
+  @property
+  def columns(self):
+    """Trailing axis of a B_hat entry: k for lowrank/block, none for diagonal."""
+    return (self.rank,) if self.kind in ("lowrank", "block") else ()
+
+  def bound(self, group):
+    return dict(self.bounds)[group]
+
+
+class Params(NamedTuple):
+  """The trainable arrays (what the optimiser sees).
+
+  Attributes:
+    mean: {group: [C, ...]} raw 3DGS parameters, the mean of the distribution.
+    spread: {group: [C, ..., k] (lowrank, block) or [C, ...] (diagonal)} raw entries of
+      B_hat for the stochastic groups; empty for the deterministic sampler.
+  """
+
+  mean: dict
+  spread: dict
+
+
+@pytree_dataclass
+class Model:
+  """A stochastic 3DGS model with a fixed capacity C.
+
+  Attributes:
+    params: `Params` (trainable).
+    signs: {group: int8 array shaped like params.spread[group]}: the fixed +-1 of B_hat.
+    mask: [C] bool, True on live Gaussians.
+    sh_degree: int32 scalar, the active SH degree (the 3DGS schedule raises it during
+      training); higher bands are zeroed by `activate`, so shapes never change.
+    spec: `SamplerSpec` (static).
+  """
+
+  params: Params
+  signs: dict
+  mask: chex.Array
+  sh_degree: chex.Array
+  spec: SamplerSpec = static_field()
+
+  @property
+  def capacity(self):
+    return self.mask.shape[0]
+
+  @property
+  def max_sh_degree(self):
+    rest = self.params.mean.get("sh_rest")
+    return 0 if rest is None else int(np.sqrt(rest.shape[1] + 1)) - 1
+
+  @property
+  def num_live(self):
+    """Number of live Gaussians (host int; syncs)."""
+    return int(np.sum(np.asarray(self.mask)))
+
+  def replace(self, **changes):
+    return replace(self, **changes)
+
+
+def group_shapes(sh_degree):
+  """{group: per-Gaussian trailing shape} of a model with SH degree `sh_degree`."""
+  shapes = {"means": (3,), "log_scales": (3,), "quats": (4,), "opacity_logits": (),
+            "sh_dc": (3,)}
+  if sh_degree > 0:
+    shapes["sh_rest"] = ((sh_degree + 1) ** 2 - 1, 3)
+  return shapes
+
+
+def capacity_bucket(n, minimum=256):
+  """The smallest size >= n of the form 2^j or 3 * 2^(j-1) (growth by 1.33x-1.5x).
+
+  Few distinct capacities means few recompilations of the jitted step.
+  """
+  size = 1 << max(int(minimum) - 1, 1).bit_length()  # a power of two >= 2
+  while size < n:
+    size = size * 3 // 2 if size & (size - 1) == 0 else size * 4 // 3
+  return size
+
+
+# ------------------------------------------------------------------------- activation
+
+
+def spread_magnitude(spread):
+  """|B_hat| = relu(raw), per group: the one activation of B_hat's entries.
+
+  The relu takes gradient 1 at raw = 0 (`x >= 0`, not `x > 0`): the projection after each
+  optimiser step parks entries at exactly 0, and the volume term must be able to lift them
+  again (the authors clamp raw values in place, which has the same effect).
+  """
+  return {g: jnp.where(v >= 0, v, 0.0) for g, v in spread.items()}
+
+
+def generator(spread, signs):
+  """B_hat = relu(raw) * sign, per group (paper Sec. 4.3)."""
+  magnitude = spread_magnitude(spread)
+  return {g: magnitude[g] * signs[g].astype(magnitude[g].dtype) for g in magnitude}
+
+
+def activate(mean, mask, sh_degree):
+  """Raw parameters -> `Gaussians` (the one place where constraints are applied).
+
+  scale = exp(clip(log_scale, LOG_SCALE_RANGE)), opacity = sigmoid(logit), quaternions
+  unnormalised (the renderer normalises), SH = [DC, rest] with bands above `sh_degree` zeroed
+  (shape-static schedule).
+
+  Args:
+    mean: {group: [C, ...]} raw parameters (a sample or the mean).
+    mask: [C] bool.
+    sh_degree: int scalar (may be traced), the active SH degree.
+
+  Returns:
+    `Gaussians` with C entries and `mask`.
+  """
+  sh = mean["sh_dc"][:, None, :]
+  if "sh_rest" in mean:
+    sh = jnp.concatenate([sh, mean["sh_rest"]], axis=1)
+    k = jnp.arange(sh.shape[1])
+    band = jnp.floor(jnp.sqrt(k.astype(jnp.float32)) + 1e-3).astype(jnp.int32)  # k -> l
+    sh = jnp.where((band <= sh_degree)[None, :, None], sh, 0.0)
+  return Gaussians(
+      means=mean["means"],
+      scales=jnp.exp(jnp.clip(mean["log_scales"], *LOG_SCALE_RANGE)),
+      quats=mean["quats"],
+      opacities=jax.nn.sigmoid(mean["opacity_logits"]),
+      sh=sh,
+      mask=mask,
+  )
+
+
+def mean_gaussians(model):
+  """The mean model's `Gaussians` (what evaluation and export use)."""
+  return activate(model.params.mean, model.mask, model.sh_degree)
+
+
+def project_spread(spread, spec):
+  """Clamps raw B_hat entries into [0, bound] (after every optimiser step)."""
+  return {g: jnp.clip(v, 0.0, spec.bound(g)) for g, v in spread.items()}
+
+
+# ------------------------------------------------------------------------- construction
+
+
+def init_spread(key, num, shapes, spec, init_scales, dtype=jnp.float32):
+  """Fresh B_hat entries for `num` Gaussians: raw ~ scale * U[0, 1], random signs.
+
+  Args:
+    key: PRNG key.
+    num: number of rows.
+    shapes: {group: per-Gaussian shape} of the model (stochastic groups it lacks are skipped).
+    spec: `SamplerSpec`.
+    init_scales: {group: float} multiplier of U[0, 1] (METHOD.md: 1e-3, times the scene
+      extent for centres and log-scales).
+
+  Returns:
+    (spread {group: [num, ..., k]}, signs {group: int8 same shape}); empty for the
+    deterministic sampler.
+  """
+  spread, signs = {}, {}
+  if not spec.stochastic:
+    return spread, signs
+  for i, g in enumerate(sorted(set(spec.groups) & set(shapes), key=GROUPS.index)):
+    shape = (num,) + tuple(shapes[g]) + spec.columns
+    k_raw, k_sign = jax.random.split(jax.random.fold_in(key, i))
+    spread[g] = init_scales[g] * jax.random.uniform(k_raw, shape, dtype)
+    signs[g] = jnp.where(jax.random.bernoulli(k_sign, 0.5, shape), 1, -1).astype(jnp.int8)
+  return spread, signs
+
+
+def pad_rows(tree, capacity):
+  """Pads every [n, ...] leaf of `tree` with zero rows to [capacity, ...]."""
+  def pad(x):
+    extra = capacity - x.shape[0]
+    if extra < 0:
+      raise ValueError(f"cannot pad {x.shape[0]} rows to capacity {capacity}")
+    return jnp.concatenate([x, jnp.zeros((extra,) + x.shape[1:], x.dtype)], axis=0)
+  return jax.tree.map(pad, tree)
+
+
+def padding_values(shapes, num, dtype=jnp.float32):
+  """Neutral raw values for `num` padding rows (identity rotation, ~zero opacity)."""
+  out = {g: jnp.zeros((num,) + tuple(s), dtype) for g, s in shapes.items()}
+  out["quats"] = out["quats"].at[:, 0].set(1.0)
+  out["opacity_logits"] = jnp.full((num,), _PAD_OPACITY_LOGIT, dtype)
+  return out
+
+
+def init_model(key, points, *, spec, sh_degree, init_scales, capacity=None,
+               init_opacity=0.1, colors=None, dtype=jnp.float32):
+  """A model whose mean Gaussians sit at `points` (3DGS initialisation).
+
+  Scales follow 3DGS: the root mean squared distance to the 3 nearest neighbours (isotropic),
+  identity rotations, opacity `init_opacity`; colours near grey unless `colors` is given
+  (3DGS's random initialisation uses SH DC ~ U[0, 1/255]).
+
+  Args:
+    key: PRNG key (colours, B_hat entries and signs).
+    points: [N, 3] initial centres (host array), N >= 1.
+    spec: `SamplerSpec`.
+    sh_degree: maximum SH degree (0..3); no SH-rest arrays when 0.
+    init_scales: {group: float} see `init_spread`.
+    capacity: C >= N (default `capacity_bucket(N)`).
+    init_opacity: initial opacity in (0, 1).
+    colors: optional [N, 3] RGB in [0, 1].
+
+  Returns:
+    `Model` with the first N rows live and `sh_degree` (active) 0.
+  """
+  points = np.asarray(points, np.float64)
+  if points.ndim != 2 or points.shape[1] != 3 or len(points) < 1:
+    raise ValueError(f"points must have shape [N >= 1, 3], got {points.shape}")
+  n = len(points)
+  capacity = capacity_bucket(n) if capacity is None else int(capacity)
+  if capacity < n:
+    raise ValueError(f"capacity {capacity} < number of points {n}")
+  shapes = group_shapes(sh_degree)
+  k_color, k_spread = jax.random.split(key)
+  from mfsample.render.sh import rgb_to_sh_dc  # local: keeps model importable standalone
+  if colors is None:
+    sh_dc = jax.random.uniform(k_color, (n, 3), dtype) / 255.0
+  else:
+    sh_dc = rgb_to_sh_dc(jnp.asarray(colors, dtype))
+  mean = {
+      "means": jnp.asarray(points, dtype),
+      "log_scales": jnp.asarray(np.repeat(np.log(knn_scale(points))[:, None], 3, 1), dtype),
+      "quats": jnp.tile(jnp.array([1.0, 0.0, 0.0, 0.0], dtype), (n, 1)),
+      "opacity_logits": jnp.full((n,), float(np.log(init_opacity / (1 - init_opacity))),
+                                 dtype),
+      "sh_dc": sh_dc,
+  }
+  if "sh_rest" in shapes:
+    mean["sh_rest"] = jnp.zeros((n,) + shapes["sh_rest"], dtype)
+  pad = padding_values(shapes, capacity - n, dtype)
+  mean = {g: jnp.concatenate([mean[g], pad[g]], axis=0) for g in mean}
+  spread, signs = init_spread(k_spread, n, shapes, spec, init_scales, dtype)
+  spread, signs = pad_rows(spread, capacity), pad_rows(signs, capacity)
+  mask = jnp.arange(capacity) < n
+  return Model(Params(mean, spread), signs, mask, jnp.int32(0), spec)
+
+
+def knn_scale(points, k=3):
+  """[N] root mean squared distance to the k nearest other points (3DGS scale init)."""
+  points = np.asarray(points, np.float64)
+  n = len(points)
+  if n < 2:
+    return np.full((n,), 0.01)
+  from scipy.spatial import cKDTree  # host-only dependency, imported where used
+  kk = min(k, n - 1)
+  dist, _ = cKDTree(points).query(points, k=kk + 1)
+  d2 = np.mean(np.square(dist[:, 1:]), axis=1)
+  return np.sqrt(np.maximum(d2, 1e-7))

@@ -1,0 +1,31 @@
+"""Training a stochastic Gaussian field (paper Sec. 4.3): loss, step, densification, loop.
+
+The public entry points:
+
+* `train(config, views)` -> `TrainResult`: train on any `Views` (planning reuses it).
+* `train_and_evaluate(config, workdir)` -> `TrainState`: the experiment (data from the
+  config, checkpoints, metrics, images, `.ply`).
+* `make_setup`, `init_state`, `make_train_step`, `train_step`: the pieces, for custom loops.
+"""
+
+from mfsample.train.loop import (
+                                 TrainResult,
+                                 TrainSetup,
+                                 init_state,
+                                 make_setup,
+                                 train,
+                                 train_and_evaluate,
+)
+from mfsample.train.step import (
+                                 DensifyStats,
+                                 StepConfig,
+                                 StepMetrics,
+                                 TrainState,
+                                 make_train_step,
+                                 train_step,
+)
+
+__all__ = [
+    "DensifyStats", "StepConfig", "StepMetrics", "TrainResult", "TrainSetup", "TrainState",
+    "init_state", "make_setup", "make_train_step", "train", "train_and_evaluate", "train_step",
+]

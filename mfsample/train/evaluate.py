@@ -1,0 +1,121 @@
+"""Evaluation of a trained model: test metrics, renders and per-pixel uncertainty maps."""
+
+import functools
+import os
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from mfsample import metrics, samplers
+from mfsample.model import mean_gaussians
+from mfsample.render import render
+from mfsample.render.budget import render_with_budget
+
+
+class EvalResult(NamedTuple):
+  """Metrics (means over views, and per view) plus the images they were computed from.
+
+  Attributes:
+    metrics: {"psnr", "ssim", "lpips" (or None), "num_views"}: means over the views.
+    per_view: {"psnr": [V], "ssim": [V], "lpips": [V] or None}.
+    images: [V, H, W, 3] renders of the mean model, clipped to [0, 1].
+    uncertainty: [V, H, W] per-pixel variance over samples (summed over RGB), or None.
+  """
+
+  metrics: dict
+  per_view: dict
+  images: np.ndarray
+  uncertainty: np.ndarray | None
+
+
+@functools.partial(jax.jit, static_argnames=("settings",))
+def _render_mean(model, camera, background, settings):
+  return render(mean_gaussians(model), camera, background=background, settings=settings)
+
+
+@functools.partial(jax.jit, static_argnames=("settings",))
+def _render_samples(model, camera, zs, background, settings):
+  def one(z):
+    return render(samplers.sample(model, z), camera, background=background, settings=settings)
+  return jax.vmap(one)(zs)
+
+
+def pixel_variance(rgbs):
+  """Per-pixel uncertainty (Eq. 10 before the sum over pixels): [M, H, W, 3] -> [H, W].
+
+  (1/M) sum_samples ||C_sample - C_mean||^2, with C_mean the mean over the M samples.
+  """
+  mean = jnp.mean(rgbs, axis=0, keepdims=True)
+  return jnp.mean(jnp.sum(jnp.square(rgbs - mean), axis=-1), axis=0)
+
+
+def uncertainty_map(model, camera, zs, *, background, settings):
+  """[H, W] per-pixel variance of `model` seen from `camera` over the samples `zs` [M, ...].
+
+  Returns (map, settings that sufficed).
+  """
+  out, settings = render_with_budget(_render_samples, settings, model, camera, zs,
+                                     background)
+  return pixel_variance(out.rgb), settings
+
+
+def evaluate(model, views, *, background, settings, lpips_fn=None, uncertainty_z=None):
+  """Renders the mean model at every view and compares it with the images.
+
+  Args:
+    model: `Model`.
+    views: `Views` with ground truth.
+    background: [3] colour.
+    settings: `RenderSettings` to start from (grown on overflow, never truncated).
+    lpips_fn: optional `metrics.make_lpips(...)` function.
+    uncertainty_z: optional [M, *z_shape] samples for the uncertainty maps (stochastic
+      models only).
+
+  Returns:
+    `EvalResult`.
+  """
+  bg = jnp.asarray(background, jnp.float32)
+  psnrs, ssims, lpipss, images, unc = [], [], [], [], []
+  for i in range(len(views)):
+    camera = views.cameras[i]
+    out, settings = render_with_budget(_render_mean, settings, model, camera, bg)
+    pred = jnp.clip(out.rgb, 0.0, 1.0)
+    gt = jnp.asarray(views.images[i], jnp.float32)
+    psnrs.append(float(metrics.psnr(pred, gt)))
+    ssims.append(float(metrics.ssim(pred, gt)))
+    if lpips_fn is not None:
+      lpipss.append(float(lpips_fn(pred, gt)))
+    images.append(np.asarray(pred))
+    if uncertainty_z is not None and model.spec.stochastic:
+      u, settings = uncertainty_map(model, camera, uncertainty_z, background=bg,
+                                    settings=settings)
+      unc.append(np.asarray(u))
+  summary = {"psnr": float(np.mean(psnrs)), "ssim": float(np.mean(ssims)),
+             "lpips": float(np.mean(lpipss)) if lpipss else None, "num_views": len(views)}
+  per_view = {"psnr": psnrs, "ssim": ssims, "lpips": lpipss or None}
+  return EvalResult(summary, per_view, np.stack(images), np.stack(unc) if unc else None)
+
+
+def save_images(directory, result: EvalResult, views, num=None):
+  """Writes renders, ground truth and uncertainty maps of the first `num` views as PNG.
+
+  Uncertainty maps share one scale (the largest value over the written views) so that
+  views compare; the raw float maps go to `uncertainty.npy`.
+  """
+  import imageio.v3 as iio
+
+  os.makedirs(directory, exist_ok=True)
+  num = len(views) if num is None else min(num, len(views))
+  to8 = lambda x: (np.clip(np.asarray(x), 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
+  names = views.names or tuple(f"view_{i:03d}" for i in range(len(views)))
+  if result.uncertainty is not None:
+    scale = max(float(np.max(result.uncertainty[:num])), 1e-12)
+    np.save(os.path.join(directory, "uncertainty.npy"), result.uncertainty[:num])
+  for i in range(num):
+    iio.imwrite(os.path.join(directory, f"{names[i]}_render.png"), to8(result.images[i]))
+    iio.imwrite(os.path.join(directory, f"{names[i]}_gt.png"), to8(views.images[i]))
+    if result.uncertainty is not None:
+      iio.imwrite(os.path.join(directory, f"{names[i]}_uncertainty.png"),
+                  to8(result.uncertainty[i] / scale))

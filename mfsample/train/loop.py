@@ -1,0 +1,316 @@
+"""The host loop: `train` (reusable) and `train_and_evaluate` (the experiment entry point).
+
+The loop is thin: it picks the view and Sobol rows of each step (both functions of
+(seed, step)), calls the jitted step, grows the render budget when a step reports
+overflow (the step left the state untouched, so it is simply re-run), and runs the host
+events of 3DGS (densification, opacity reset) and checkpoints between steps.
+"""
+
+import dataclasses
+import json
+import os
+import time
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from mfsample.model import GROUPS, SamplerSpec, group_shapes, init_model
+from mfsample.render.budget import BudgetExceededError, fit_budget
+from mfsample.render.settings import RenderSettings
+from mfsample.samplers import sobol_z
+from mfsample.train import checkpoint as ckpt
+from mfsample.train import data as data_lib
+from mfsample.train import densify as densify_lib
+from mfsample.train import optim
+from mfsample.train.step import StepConfig, TrainState, init_train_state, make_train_step
+
+
+class TrainSetup(NamedTuple):
+  """Host-side constants of a run, derived from the config and the training views."""
+
+  extent: float  # scene extent (world units)
+  spec: SamplerSpec
+  init_scales: dict  # {group: float} scale of fresh B_hat entries
+  step_config: StepConfig  # static settings of the jitted step (budget included)
+  num_steps: int
+  sobol: np.ndarray  # [num_steps * M, k] z rows (empty unless lowrank + Sobol)
+
+
+class TrainResult(NamedTuple):
+  """What `train` returns."""
+
+  state: TrainState
+  setup: TrainSetup  # with the render budget that sufficed
+  history: list  # dicts logged every `config.train.log_every` steps
+  seconds: float  # wall-clock of the steps run in this call (compilation included)
+
+
+# ------------------------------------------------------------------------- setup
+
+
+def sampler_spec(config, extent, sh_degree):
+  """`SamplerSpec` from `config.sampler` (bounds of the centres scale with the extent)."""
+  groups = tuple(g for g in config.sampler.groups if g in group_shapes(sh_degree))
+  bounds = tuple((g, float(config.sampler.bounds[g]) * (extent if g == "means" else 1.0))
+                 for g in groups)
+  return SamplerSpec(kind=config.sampler.kind, rank=int(config.sampler.rank), groups=groups,
+                     bounds=bounds)
+
+
+def make_setup(config, train_views, *, extent=None):
+  """`TrainSetup` for training on `train_views` with `config`."""
+  if extent is None:
+    extent = (config.data.extent if config.data.get("extent") is not None
+              else data_lib.scene_extent(train_views.cameras))
+  sh_degree = int(config.model.sh_degree)
+  spec = sampler_spec(config, extent, sh_degree)
+  init_scales = {g: config.sampler.init_scale * (extent if g in config.sampler.init_extent_groups
+                                                 else 1.0) for g in GROUPS}
+  num_steps = int(config.train.num_steps)
+  max_steps = config.optim.position_lr_max_steps or num_steps
+  rates = optim.learning_rates(config.optim, config.sampler.lr, extent, max_steps)
+  volume_weight = config.loss.volume_weight
+  if volume_weight is None:
+    volume_weight = 1.0 / len(train_views)
+  settings = RenderSettings(max_intersections=int(config.render.max_intersections),
+                            tile_size=int(config.render.tile_size))
+  step_config = StepConfig(
+      settings=settings,
+      background=tuple(float(c) for c in config.data.background),
+      num_samples=int(config.sampler.num_samples),
+      ssim_weight=float(config.loss.ssim_weight),
+      volume_weight=float(volume_weight),
+      volume_every=int(config.loss.volume_every),
+      volume_until=num_steps - int(config.loss.volume_stop_before_end),
+      stats_until=int(config.densify.stop),
+      sh_degree_every=int(config.densify.sh_degree_every),
+      stochastic_until=(2**31 - 1 if config.sampler.stochastic_until is None
+                        else int(config.sampler.stochastic_until)),
+      rates=rates,
+  )
+  m = step_config.num_samples
+  if spec.kind == "lowrank" and spec.stochastic and config.sampler.z == "sobol":
+    sobol = sobol_z(num_steps * m, spec.rank, int(config.sampler.z_seed))
+  elif config.sampler.z not in ("sobol", "uniform"):
+    raise ValueError(f"config.sampler.z must be 'sobol' or 'uniform', got {config.sampler.z!r}")
+  else:
+    sobol = np.zeros((num_steps * m, 0), np.float32)
+  return TrainSetup(extent=float(extent), spec=spec, init_scales=init_scales,
+                    step_config=step_config,
+                    num_steps=num_steps, sobol=sobol)
+
+
+def init_state(config, setup: TrainSetup, bounds):
+  """The step-0 `TrainState`: random points in the box `bounds` = (low [3], high [3])."""
+  rng = np.random.default_rng([int(config.seed), 0])
+  low, high = (np.asarray(b, np.float64) for b in bounds)
+  points = rng.uniform(low, high, (int(config.model.init_points), 3))
+  key = jax.random.PRNGKey(int(config.seed))
+  k_model, k_train = jax.random.split(key)
+  model = init_model(k_model, points, spec=setup.spec, sh_degree=int(config.model.sh_degree),
+                     init_scales=setup.init_scales, init_opacity=config.model.init_opacity)
+  return init_train_state(model, setup.step_config, k_train)
+
+
+def view_for_step(seed, step, num_views):
+  """The training view of `step`: epochs of random permutations (3DGS), seeded per epoch."""
+  epoch, within = divmod(int(step), num_views)
+  return int(np.random.default_rng([int(seed), 1, epoch]).permutation(num_views)[within])
+
+
+# ------------------------------------------------------------------------- training
+
+
+def _meta(config, setup, state):
+  return {"step": int(state.step), "capacity": int(state.model.capacity),
+          "max_intersections": int(setup.step_config.settings.max_intersections),
+          "seed": int(config.seed), "sobol_seed": int(config.sampler.z_seed),
+          "sobol_position": int(state.step) * setup.step_config.num_samples,
+          "extent": setup.extent}
+
+
+def restore_latest(config, setup, bounds, directory):
+  """(state, setup) from the newest checkpoint in `directory`, or None if there is none."""
+  paths = ckpt.list_checkpoints(directory)
+  if not paths:
+    return None
+  meta = ckpt.read_meta(paths[-1])
+  template = init_state(config, setup, bounds)
+  template = densify_lib.grow_capacity(template, meta["capacity"])
+  state, meta = ckpt.restore_checkpoint(paths[-1], template)
+  settings = setup.step_config.settings.replace(max_intersections=meta["max_intersections"])
+  setup = setup._replace(step_config=dataclasses.replace(setup.step_config, settings=settings))
+  return state, setup
+
+
+def _host_events(config, setup, state, step):
+  """Densification and opacity reset after `step` completed steps (3DGS schedule)."""
+  d = config.densify
+  report = None
+  if d.start < step < d.stop and step % d.every == 0:
+    key = jax.random.fold_in(jax.random.PRNGKey(int(config.seed) + 1), step)
+    state, report = densify_lib.densify_and_prune(
+        state, key=key, rng=np.random.default_rng([int(config.seed), 2, step]),
+        grad_threshold=d.grad_threshold, percent_dense=d.percent_dense, extent=setup.extent,
+        min_opacity=d.min_opacity, init_scales=setup.init_scales,
+        max_gaussians=config.model.max_gaussians, prune_big=step > d.prune_big_after,
+        max_screen_size=d.max_screen_size, max_world_size=d.max_world_size)
+  white = all(c == 1.0 for c in setup.step_config.background)
+  if step < d.stop and (step % d.opacity_reset_every == 0 or (white and step == d.start)):
+    state = densify_lib.reset_opacity(state)
+  return state, report
+
+
+def train(config, views, *, setup=None, state=None, bounds=None, checkpoint_dir=None,
+          stop_at=None, max_traces=None):
+  """Trains a stochastic Gaussian field on `views` (reusable: planning calls this).
+
+  Args:
+    config: a training config (`configs/train_default.py`).
+    views: training `Views`.
+    setup: optional `TrainSetup` (default: `make_setup(config, views)`).
+    state: optional starting `TrainState` (default: a fresh one, or the newest checkpoint
+      in `checkpoint_dir`).
+    bounds: (low [3], high [3]) of the initial point cloud (default: `config.data.init_bounds`).
+    checkpoint_dir: if set, resume from and write checkpoints there.
+    stop_at: stop after this many steps without a final checkpoint, as a killed run
+      would (tests use it).
+    max_traces: passed to `make_train_step` (tests: 1).
+
+  Returns:
+    `TrainResult`.
+  """
+  from tqdm.auto import tqdm
+
+  setup = setup or make_setup(config, views)
+  if bounds is None:
+    lo, hi = config.data.init_bounds
+    bounds = (np.full(3, lo), np.full(3, hi))
+  if state is None and checkpoint_dir:
+    restored = restore_latest(config, setup, bounds, checkpoint_dir)
+    if restored is not None:
+      state, setup = restored
+  if state is None:
+    state = init_state(config, setup, bounds)
+  views = data_lib.to_device(views)
+  m = setup.step_config.num_samples
+  step_fn = make_train_step(setup.step_config, max_traces)
+  step = int(state.step)
+  end = setup.num_steps if stop_at is None else min(stop_at, setup.num_steps)
+  history = []
+  bar = tqdm(total=setup.num_steps, initial=step, disable=not config.train.progress,
+             desc=f"train {setup.spec.kind}", dynamic_ncols=True)
+  t0 = time.perf_counter()
+  while step < end:
+    view = jnp.int32(view_for_step(config.seed, step, len(views)))
+    rows = setup.sobol[step * m:(step + 1) * m]
+    new_state, metrics = step_fn(state, views.images, views.cameras, view, rows)
+    if bool(metrics.overflow):  # nothing was updated: grow the budget and redo the step
+      settings = fit_budget(setup.step_config.settings, metrics)
+      if settings.max_intersections > config.render.max_budget:
+        raise BudgetExceededError(
+            f"step {step} needs {int(metrics.num_padded)} intersections, more than "
+            f"config.render.max_budget={config.render.max_budget}")
+      setup = setup._replace(step_config=dataclasses.replace(setup.step_config,
+                                                             settings=settings))
+      step_fn = make_train_step(setup.step_config, max_traces)
+      continue
+    state, step = new_state, step + 1
+    state, report = _host_events(config, setup, state, step)
+    if step % config.train.log_every == 0 or step == end:
+      entry = {"step": step, "loss": float(metrics.loss), "data_loss": float(metrics.data_loss),
+               "volume": float(metrics.volume), "live": state.model.num_live,
+               "capacity": state.model.capacity,
+               "budget": setup.step_config.settings.max_intersections,
+               "seconds": time.perf_counter() - t0}
+      if report is not None:
+        entry["densify"] = report._asdict()
+      history.append(entry)
+      bar.set_postfix(loss=f"{entry['data_loss']:.4f}", n=entry["live"])
+    bar.update(1)
+    if checkpoint_dir and (step % config.train.checkpoint_every == 0
+                           or (step == setup.num_steps)):
+      ckpt.save_checkpoint(checkpoint_dir, state, _meta(config, setup, state),
+                           keep=config.train.keep_checkpoints)
+  bar.close()
+  return TrainResult(state, setup, history, time.perf_counter() - t0)
+
+
+# ------------------------------------------------------------------------- experiment
+
+
+def train_and_evaluate(config, workdir):
+  """Loads the data, trains (resuming from `workdir`), evaluates, writes everything.
+
+  Writes to `workdir`: `checkpoints/`, `config.json`, `train_log.json`, `metrics.json`
+  (test PSNR / SSIM / LPIPS of the mean model, iterations, wall-clock), `images/`
+  (renders, ground truth, uncertainty maps of test views) and `point_cloud.ply`.
+
+  Returns:
+    the final `TrainState`.
+  """
+  from mfsample import export_ply, metrics
+  from mfsample.train import evaluate as eval_lib
+
+  os.makedirs(workdir, exist_ok=True)
+  with open(os.path.join(workdir, "config.json"), "w") as f:
+    f.write(config.to_json_best_effort(indent=2))
+  dataset = data_lib.load_dataset(config.data)
+  result = train(config, dataset.train, bounds=dataset.bounds,
+                 checkpoint_dir=os.path.join(workdir, "checkpoints"))
+  state, setup = result.state, result.setup
+  log_path = os.path.join(workdir, "train_log.json")
+  previous = []
+  if os.path.exists(log_path):
+    with open(log_path) as f:
+      previous = json.load(f)
+  _write_json(log_path, previous + result.history)
+
+  lpips_fn = metrics.make_lpips(config.eval.lpips_net) if config.eval.lpips_net else None
+  model = state.model
+  z = None
+  if model.spec.stochastic and config.eval.uncertainty_samples > 0:
+    from mfsample import samplers
+    m = int(config.eval.uncertainty_samples)
+    key = jax.random.PRNGKey(int(config.seed) + 3)
+    rows = sobol_z(m, model.spec.rank, int(config.sampler.z_seed) + 1) \
+        if model.spec.kind == "lowrank" else None
+    z = samplers.draw_z(model, m, key, rows)
+  t0 = time.perf_counter()
+  ev = eval_lib.evaluate(model, dataset.test, background=dataset.background,
+                         settings=setup.step_config.settings, lpips_fn=lpips_fn,
+                         uncertainty_z=z)
+  eval_seconds = time.perf_counter() - t0
+  eval_lib.save_images(os.path.join(workdir, "images"), ev, dataset.test,
+                       num=config.eval.save_images)
+  if config.eval.export_ply:
+    export_ply.export_ply(os.path.join(workdir, "point_cloud.ply"), model)
+  train_seconds = sum(e["seconds"] for e in _last_segments(previous + result.history))
+  summary = dict(ev.metrics)
+  summary.update({
+      "sampler": model.spec.kind, "rank": model.spec.rank,
+      "steps": int(state.step), "live_gaussians": model.num_live,
+      "train_seconds": train_seconds, "eval_seconds": eval_seconds,
+      "resolution": [int(dataset.train.images.shape[2]), int(dataset.train.images.shape[1])],
+      "num_train_views": len(dataset.train), "per_view": ev.per_view,
+  })
+  _write_json(os.path.join(workdir, "metrics.json"), summary)
+  return state
+
+
+def _last_segments(history):
+  """The last log entry of each run segment (seconds restart at 0 when a run resumes)."""
+  out = []
+  for i, e in enumerate(history):
+    if i + 1 == len(history) or history[i + 1]["seconds"] < e["seconds"]:
+      out.append(e)
+  return out
+
+
+def _write_json(path, obj):
+  tmp = path + ".tmp"
+  with open(tmp, "w") as f:
+    json.dump(obj, f, indent=2)
+  os.replace(tmp, path)

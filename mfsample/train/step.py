@@ -1,0 +1,217 @@
+"""The training state and the jitted training step (static shapes, no host logic).
+
+One step: draw z, render M samples theta(z) of the model into one training view, take the
+gradient of the Eq. 9 loss w.r.t. the mean and B_hat, apply Adam with per-group learning
+rates, clamp B_hat into its bounds, and accumulate the densification statistics. If any
+render overflowed its intersection budget the step returns the *unchanged* state and
+raises `overflow`: the host grows the budget and re-runs the step, so training never
+updates on a truncated image.
+"""
+
+import dataclasses
+import functools
+from typing import NamedTuple
+
+import chex
+import jax
+import jax.numpy as jnp
+import optax
+
+from mfsample import samplers
+from mfsample.model import Model, project_spread
+from mfsample.render.settings import RenderSettings
+from mfsample.train import losses, optim
+from mfsample.train.render_train import render_for_training
+
+
+class DensifyStats(NamedTuple):
+  """Per-Gaussian statistics between two densifications (3DGS).
+
+  Attributes:
+    grad_accum: [C] sum over steps of ||dL/d(2D centre)|| in NDC units (pixel gradient
+      times half the image size, as 3DGS measures it, so the threshold 2e-4 carries over
+      across resolutions).
+    count: [C] int32 number of steps in which the Gaussian was visible.
+    max_radii: [C] largest screen radius seen (pixels).
+  """
+
+  grad_accum: chex.Array
+  count: chex.Array
+  max_radii: chex.Array
+
+  @classmethod
+  def zeros(cls, capacity, dtype=jnp.float32):
+    return cls(jnp.zeros((capacity,), dtype), jnp.zeros((capacity,), jnp.int32),
+               jnp.zeros((capacity,), dtype))
+
+
+class TrainState(NamedTuple):
+  """Everything the jitted step reads and writes.
+
+  Attributes:
+    step: int32 scalar, completed steps.
+    model: `Model` (mean, B_hat, signs, mask, active SH degree).
+    opt_state: state of `optim.make_optimizer`.
+    stats: `DensifyStats`.
+    key: [2] uint32 PRNG key; the key of step t is fold_in(key, t), so a resumed run draws
+      the same numbers.
+  """
+
+  step: chex.Array
+  model: Model
+  opt_state: optax.OptState
+  stats: DensifyStats
+  key: chex.Array
+
+
+class StepMetrics(NamedTuple):
+  """Scalars a step reports (host reads them every step, cheaply)."""
+
+  loss: chex.Array  # total loss (Eq. 9)
+  data_loss: chex.Array  # photometric term, mean over samples
+  volume: chex.Array  # ||B_hat||_1 over live Gaussians
+  overflow: chex.Array  # bool: a render exceeded the budget; the state was not updated
+  num_padded: chex.Array  # int32: largest padded intersection count over the samples
+
+
+@dataclasses.dataclass(frozen=True)
+class StepConfig:
+  """Static (hashable) settings of the step.
+
+  Attributes:
+    settings: `RenderSettings` (its budget is grown by the host on overflow).
+    background: RGB tuple behind the Gaussians.
+    num_samples: M, samples rendered per step (paper: 1).
+    ssim_weight: w of the D-SSIM term (3DGS: 0.2).
+    volume_weight: lambda of Eq. 9.
+    volume_every: the volume term is applied on every `volume_every`-th step only.
+    volume_until: no volume term from this step on (authors: the last 100 steps).
+    stats_until: densification statistics are accumulated before this step.
+    sh_degree_every: the active SH degree rises by one every this many steps (3DGS: 1000).
+    stochastic_until: from this step on the step renders the mean (z = 0), while the
+      volume term goes on as configured. The paper samples at every step (the default,
+      never); the authors' code stops after the first opacity reset (step 3000).
+    rates: `optim.LearningRates` of the per-group Adam.
+  """
+
+  settings: RenderSettings = RenderSettings()
+  background: tuple = (0.0, 0.0, 0.0)
+  num_samples: int = 1
+  ssim_weight: float = 0.2
+  volume_weight: float = 0.0
+  volume_every: int = 10
+  volume_until: int = 2**31 - 1
+  stats_until: int = 2**31 - 1
+  sh_degree_every: int = 1000
+  stochastic_until: int = 2**31 - 1
+  rates: optim.LearningRates = optim.LearningRates()
+
+  @property
+  def optimizer(self):
+    return optim.make_optimizer(self.rates)
+
+
+def init_train_state(model: Model, cfg: StepConfig, key):
+  """A fresh `TrainState` (step 0) for `model`."""
+  return TrainState(step=jnp.int32(0), model=model, opt_state=cfg.optimizer.init(model.params),
+                    stats=DensifyStats.zeros(model.capacity), key=jnp.asarray(key))
+
+
+def _mask_rows(tree, mask):
+  """Zeros every [C, ...] leaf on rows where mask is False."""
+  def f(x):
+    return jnp.where(mask.reshape((-1,) + (1,) * (x.ndim - 1)), x, jnp.zeros_like(x))
+  return jax.tree.map(f, tree)
+
+
+def train_step(state: TrainState, images, cameras, view, sobol_rows, *, cfg: StepConfig):
+  """One optimisation step (pure; `train_step_jit` is its jitted form).
+
+  Args:
+    state: `TrainState`.
+    images: [V, H, W, 3] training images.
+    cameras: `Camera` batched over V.
+    view: int32 scalar, the training view of this step.
+    sobol_rows: [M, k] Sobol z's of this step (low-rank sampler; ignored otherwise).
+    cfg: `StepConfig` (static).
+
+  Returns:
+    (new state, `StepMetrics`).
+  """
+  step = state.step
+  model = state.model
+  max_degree = model.max_sh_degree
+  model = model.replace(sh_degree=jnp.minimum(step // cfg.sh_degree_every, max_degree)
+                        .astype(jnp.int32))
+  image = images[view]
+  camera = cameras[view]
+  key = jax.random.fold_in(state.key, step)
+  z = samplers.draw_z(model, cfg.num_samples, key, sobol_rows)
+  z = jnp.where(step < cfg.stochastic_until, z, 0.0)
+  volume_on = ((step + 1) % cfg.volume_every == 0) & (step < cfg.volume_until)
+  volume_weight = jnp.where(volume_on, cfg.volume_weight, 0.0)
+  offset2d = jnp.zeros((model.capacity, 2), model.params.mean["means"].dtype)
+
+  def loss_fn(params, offset2d):
+    m = model.replace(params=params)
+
+    def one(z_i):
+      out = render_for_training(samplers.sample(m, z_i), camera, offset2d,
+                                background=cfg.background, settings=cfg.settings)
+      return losses.photometric(out.rgb, image, cfg.ssim_weight), (out.radii, out.visible,
+                                                                    out.stats)
+
+    if cfg.num_samples == 1:
+      # A plain call keeps the renderer's cheap skipping of unused budget (vmap would not).
+      data, aux = jax.tree.map(lambda x: x[None], one(z[0]))
+    else:
+      data, aux = jax.lax.map(one, z)  # sequential: same reason, and bounded memory
+    data = jnp.mean(data)
+    volume = losses.volume(m) if m.spec.stochastic else jnp.zeros((), data.dtype)
+    return data - volume_weight * volume, (data, volume, aux)
+
+  grad_fn = jax.value_and_grad(loss_fn, argnums=(0, 1), has_aux=True)
+  (loss, (data, volume, (radii, visible, stats))), (grads, grad2d) = grad_fn(
+      model.params, offset2d)
+
+  updates, opt_state = cfg.optimizer.update(grads, state.opt_state, model.params)
+  updates = _mask_rows(updates, model.mask)  # padding rows never move
+  params = optax.apply_updates(model.params, updates)
+  params = params._replace(spread=project_spread(params.spread, model.spec))
+  new_model = model.replace(params=params)
+
+  # Densification statistics (3DGS): the norm of the 2D-centre gradient in NDC units.
+  half_size = jnp.array([0.5 * camera.width, 0.5 * camera.height], grad2d.dtype)
+  grad_norm = jnp.linalg.norm(grad2d * half_size, axis=-1)
+  seen = jnp.any(visible, axis=0) & (step < cfg.stats_until)
+  new_stats = DensifyStats(
+      grad_accum=state.stats.grad_accum + jnp.where(seen, grad_norm, 0.0),
+      count=state.stats.count + seen.astype(jnp.int32),
+      max_radii=jnp.where(seen, jnp.maximum(state.stats.max_radii, jnp.max(radii, axis=0)),
+                          state.stats.max_radii),
+  )
+  new_state = TrainState(step + 1, new_model, opt_state, new_stats, state.key)
+
+  overflow = jnp.any(stats.overflow)
+  new_state = jax.tree.map(lambda old, new: jnp.where(overflow, old, new), state, new_state)
+  metrics = StepMetrics(loss=loss, data_loss=data, volume=volume, overflow=overflow,
+                        num_padded=jnp.max(stats.num_padded))
+  return new_state, metrics
+
+
+# Jitted with the (hashable) step config static: runs with equal configs share compilations.
+train_step_jit = jax.jit(train_step, static_argnames=("cfg",))
+
+
+def make_train_step(cfg: StepConfig, max_traces=None):
+  """`fn(state, images, cameras, view, sobol_rows) -> (state, StepMetrics)`, jitted.
+
+  Args:
+    cfg: `StepConfig`.
+    max_traces: if set, a separately jitted step wrapped in `chex.assert_max_traces`
+      (tests use it to show that the step does not retrace); otherwise `train_step_jit`.
+  """
+  if max_traces is None:
+    return functools.partial(train_step_jit, cfg=cfg)
+  counted = chex.assert_max_traces(train_step, n=max_traces)
+  return functools.partial(jax.jit(counted, static_argnames=("cfg",)), cfg=cfg)

@@ -1,0 +1,307 @@
+"""Tests of the training step, densification, the loop, checkpoints and resumption."""
+
+import json
+import os
+
+import chex
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from conftest import tiny_config
+
+from mfsample import samplers
+from mfsample.export_ply import read_ply
+from mfsample.model import mean_gaussians
+from mfsample.render import render_jit
+from mfsample.train import checkpoint as ckpt
+from mfsample.train import data as data_lib
+from mfsample.train import densify as densify_lib
+from mfsample.train import evaluate as eval_lib
+from mfsample.train import loop, losses
+from mfsample.train.render_train import render_for_training
+from mfsample.train.step import make_train_step
+
+KINDS = ("deterministic", "diagonal", "block", "lowrank")
+
+
+class Run:
+  """A sampler's setup, initial state and jitted step on the tiny scene."""
+
+  def __init__(self, config, dataset, max_traces=None):
+    self.config = config
+    self.views = data_lib.to_device(dataset.train)
+    self.setup = loop.make_setup(config, dataset.train)
+    self.state0 = loop.init_state(config, self.setup, dataset.bounds)
+    self.fn = make_train_step(self.setup.step_config, max_traces)
+
+  def step(self, state):
+    i = int(state.step)
+    m = self.setup.step_config.num_samples
+    view = jnp.int32(loop.view_for_step(self.config.seed, i, len(self.views)))
+    return self.fn(state, self.views.images, self.views.cameras, view,
+                   self.setup.sobol[i * m:(i + 1) * m])
+
+
+@pytest.fixture(scope="module")
+def runs(tiny_dataset):
+  out = {}
+  for kind in KINDS:
+    # The low-rank step is wrapped in chex.assert_max_traces(n=1): every test that steps
+    # it (several, with many states) shows that it never retraces.
+    out[kind] = Run(tiny_config(kind), tiny_dataset, max_traces=1 if kind == "lowrank" else None)
+  return out
+
+
+def _mean_loss(model, views, background, settings):
+  res = eval_lib.evaluate(model, views, background=background, settings=settings)
+  return float(np.mean([-p for p in res.per_view["psnr"]])), res
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_one_training_step_per_sampler(runs, kind):
+  run = runs[kind]
+  state, metrics = run.step(run.state0)
+  assert int(state.step) == 1 and not bool(metrics.overflow)
+  assert np.isfinite(float(metrics.loss)) and float(metrics.data_loss) > 0
+  live = np.asarray(state.model.mask)
+  for g, new in state.model.params.mean.items():
+    if g == "quats":  # isotropic initial Gaussians: rotations get no gradient yet
+      continue
+    old = np.asarray(run.state0.model.params.mean[g])
+    assert not np.array_equal(np.asarray(new)[live], old[live]), g
+  if kind == "deterministic":
+    assert state.model.params.spread == {}
+  else:
+    for g, new in state.model.params.spread.items():
+      new = np.asarray(new)
+      assert not np.array_equal(new[live], np.asarray(run.state0.model.params.spread[g])[live])
+      assert new.min() >= 0.0 and new.max() <= run.setup.spec.bound(g)
+  chex.assert_tree_all_finite(state)
+
+
+def test_loss_decreases_without_retracing(runs, tiny_dataset):
+  run = runs["lowrank"]
+  settings = run.setup.step_config.settings
+  before, _ = _mean_loss(run.state0.model, tiny_dataset.train, tiny_dataset.background,
+                         settings)
+  state = run.state0
+  for _ in range(36):
+    state, metrics = run.step(state)  # 36 states, 12 views: assert_max_traces(n=1) holds
+    assert not bool(metrics.overflow)
+  after, _ = _mean_loss(state.model, tiny_dataset.train, tiny_dataset.background, settings)
+  assert after < before - 2.0, (before, after)  # mean train PSNR up by more than 2 dB
+
+
+def test_volume_term_grows_b_hat(runs):
+  """On volume steps the loss is data - lambda ||B_hat||_1 and B_hat entries grow."""
+  run = runs["lowrank"]
+  state = run.state0
+  for _ in range(10):
+    state, metrics = run.step(state)
+  # Step index 9 is a volume step (every 10th); the loss includes -lambda * volume there.
+  lam = run.setup.step_config.volume_weight
+  np.testing.assert_allclose(float(metrics.loss),
+                             float(metrics.data_loss) - lam * float(metrics.volume), rtol=1e-5)
+  assert float(losses.volume(state.model)) > float(losses.volume(run.state0.model))
+
+
+def test_padding_never_changes_a_render_nor_receives_updates(runs):
+  run = runs["lowrank"]
+  state = run.state0
+  model = state.model
+  live = np.asarray(model.mask)
+  pad = jnp.asarray(~live)
+
+  def wild(x, value):  # extreme but finite values on padding rows only
+    return jnp.where(pad.reshape((-1,) + (1,) * (x.ndim - 1)), jnp.asarray(value, x.dtype), x)
+
+  mean = dict(model.params.mean)
+  mean["means"] = wild(mean["means"], 0.0)  # right in front of every camera
+  mean["opacity_logits"] = wild(mean["opacity_logits"], 10.0)
+  mean["log_scales"] = wild(mean["log_scales"], 0.0)
+  mean["sh_dc"] = wild(mean["sh_dc"], 3.0)
+  spread = {g: wild(v, 0.3) for g, v in model.params.spread.items()}
+  signs = {g: wild(v, 1) for g, v in model.signs.items()}
+  wild_model = model.replace(params=model.params._replace(mean=mean, spread=spread),
+                             signs=signs)
+  camera = run.views.cameras[0]
+  z = jnp.asarray(samplers.sobol_z(1, 2, seed=0)[0])
+  settings = run.setup.step_config.settings
+  ref = render_jit(samplers.sample(model, z), camera, settings=settings)
+  out = render_jit(samplers.sample(wild_model, z), camera, settings=settings)
+  np.testing.assert_array_equal(np.asarray(out.rgb), np.asarray(ref.rgb))
+
+  wild_state = state._replace(model=wild_model)
+  for _ in range(3):
+    wild_state, _ = run.step(wild_state)
+  for before, after in zip(jax.tree.leaves(wild_model.params),
+                           jax.tree.leaves(wild_state.model.params), strict=True):
+    np.testing.assert_array_equal(np.asarray(after)[~live], np.asarray(before)[~live])
+  adam = wild_state.opt_state[0]
+  for moment in jax.tree.leaves((adam.mu, adam.nu)):
+    assert not np.any(np.asarray(moment)[~live])
+
+
+def _tagged_state(state):
+  """A state whose Adam moments identify their parameter: mu = p + 1, nu = 2 p."""
+  params = state.model.params
+  adam, group = state.opt_state
+  adam = adam._replace(mu=jax.tree.map(lambda p: p + 1.0, params),
+                       nu=jax.tree.map(lambda p: 2.0 * p, params))
+  return state._replace(opt_state=(adam, group))
+
+
+def test_densification_keeps_parameters_and_optimizer_state_aligned(runs):
+  run = runs["lowrank"]
+  state, _ = run.step(run.state0)
+  state = _tagged_state(state)
+  model = state.model
+  n = model.num_live
+  rng = np.random.default_rng(0)
+  grads = np.zeros(model.capacity, np.float32)
+  grads[:n] = rng.choice([0.0, 1.0], n, p=[0.7, 0.3])  # ~30% above the threshold
+  logits = np.asarray(model.params.mean["opacity_logits"]).copy()
+  logits[:n][rng.random(n) < 0.2] = -10.0  # ~20% transparent: pruned
+  model = model.replace(params=model.params._replace(
+      mean=dict(model.params.mean, opacity_logits=jnp.asarray(logits))))
+  state = state._replace(model=model, stats=state.stats._replace(
+      grad_accum=jnp.asarray(grads), count=jnp.asarray((grads > 0).astype(np.int32))))
+  extent = run.setup.extent
+  new, report = densify_lib.densify_and_prune(
+      state, key=jax.random.PRNGKey(1), rng=np.random.default_rng(1), grad_threshold=0.5,
+      percent_dense=0.05, extent=extent, min_opacity=0.005,
+      init_scales=run.setup.init_scales, max_gaussians=10_000)
+  assert report.cloned + report.split > 0 and report.pruned > 0
+  nm = new.model
+  live = nm.num_live
+  assert live == n - report.pruned - report.split + report.cloned + 2 * report.split
+  assert nm.capacity >= live and not np.any(np.asarray(nm.mask)[live:])
+  adam = new.opt_state[0]
+  kept = live - report.cloned - 2 * report.split
+  for g, p in nm.params.mean.items():
+    p, mu, nu = (np.asarray(x) for x in (p, adam.mu.mean[g], adam.nu.mean[g]))
+    np.testing.assert_allclose(mu[:kept], p[:kept] + 1.0, rtol=1e-6)  # moved together
+    np.testing.assert_allclose(nu[:kept], 2.0 * p[:kept], rtol=1e-6)
+    assert not np.any(mu[kept:]) and not np.any(nu[kept:])  # new rows: fresh moments
+  for g, s in nm.params.spread.items():
+    s = np.asarray(s)
+    np.testing.assert_allclose(np.asarray(adam.mu.spread[g])[:kept], s[:kept] + 1.0, rtol=1e-6)
+    fresh = s[kept:live]
+    assert fresh.min() >= 0.0 and fresh.max() <= run.setup.init_scales[g]  # small, not copies
+    assert set(np.unique(np.asarray(nm.signs[g])[:live])) <= {-1, 1}
+    assert not np.any(s[live:]) and not np.any(np.asarray(nm.signs[g])[live:])
+  # Split children are smaller than their parents by 1.6 (3DGS).
+  old_scales = np.asarray(model.params.mean["log_scales"])
+  children = np.asarray(nm.params.mean["log_scales"])[kept + report.cloned:live]
+  assert children.max() <= old_scales[:n].max() - np.log(1.6) + 1e-5
+  assert not np.any(np.asarray(new.stats.grad_accum))
+  chex.assert_tree_all_finite(new)
+
+
+def test_densification_respects_max_gaussians(runs):
+  run = runs["lowrank"]
+  state = run.state0
+  n = state.model.num_live
+  state = state._replace(stats=state.stats._replace(
+      grad_accum=jnp.ones(state.model.capacity), count=jnp.ones(state.model.capacity,
+                                                                jnp.int32)))
+  new, report = densify_lib.densify_and_prune(
+      state, key=jax.random.PRNGKey(0), rng=np.random.default_rng(0), grad_threshold=0.5,
+      percent_dense=0.01, extent=run.setup.extent, min_opacity=0.0,
+      init_scales=run.setup.init_scales, max_gaussians=n + 10)
+  assert report.live <= n + 10 and report.split + report.cloned > 0
+
+
+def test_opacity_reset_and_capacity_growth(runs):
+  run = runs["lowrank"]
+  state, _ = run.step(run.state0)
+  state = _tagged_state(state)
+  reset = densify_lib.reset_opacity(state)
+  assert float(jnp.max(jax.nn.sigmoid(reset.model.params.mean["opacity_logits"]))) <= 0.0100001
+  assert not np.any(np.asarray(reset.opt_state[0].mu.mean["opacity_logits"]))
+  chex.assert_trees_all_equal(reset.opt_state[0].mu.mean["means"],
+                              state.opt_state[0].mu.mean["means"])
+  grown = densify_lib.grow_capacity(state, state.model.capacity + 128)
+  assert grown.model.capacity == state.model.capacity + 128
+  assert grown.model.num_live == state.model.num_live
+  for a, b in zip(jax.tree.leaves(state.opt_state[0].mu), jax.tree.leaves(
+      grown.opt_state[0].mu), strict=True):
+    np.testing.assert_array_equal(np.asarray(b)[:a.shape[0]], np.asarray(a))
+
+
+def test_render_for_training_matches_render(runs):
+  run = runs["lowrank"]
+  g = mean_gaussians(run.state0.model)
+  camera = run.views.cameras[1]
+  settings = run.setup.step_config.settings
+  bg = jnp.asarray([0.2, 0.3, 0.4])
+  ref = render_jit(g, camera, background=bg, settings=settings)
+  out = jax.jit(render_for_training, static_argnames="settings")(
+      g, camera, jnp.zeros((g.num_gaussians, 2)), background=bg, settings=settings)
+  np.testing.assert_array_equal(np.asarray(out.rgb), np.asarray(ref.rgb))
+  np.testing.assert_array_equal(np.asarray(out.alpha), np.asarray(ref.alpha))
+  assert int(out.stats.num_padded) == int(ref.stats.num_padded)
+
+
+@pytest.mark.parametrize("kind,rank", [("lowrank", 1), ("lowrank", 64)])
+def test_step_finite_at_the_extremes(tiny_dataset, kind, rank):
+  """One Gaussian, B_hat at its bounds, rank 1 and 64: finite loss, gradients and state."""
+  config = tiny_config(kind, **{"sampler.rank": rank, "model.init_points": 1})
+  run = Run(config, tiny_dataset)
+  state = run.state0
+  model = state.model
+  spread = {g: jnp.where(model.mask.reshape((-1,) + (1,) * (v.ndim - 1)),
+                         run.setup.spec.bound(g), 0.0) for g, v in model.params.spread.items()}
+  state = state._replace(model=model.replace(params=model.params._replace(spread=spread)))
+  for _ in range(2):
+    state, metrics = run.step(state)
+    assert np.isfinite(float(metrics.loss))
+  chex.assert_tree_all_finite(state)
+
+
+def test_overflow_leaves_the_state_untouched(tiny_dataset):
+  run = Run(resume_config(), tiny_dataset)  # a deliberately small budget
+  state, metrics = run.step(run.state0)
+  assert bool(metrics.overflow)
+  chex.assert_trees_all_equal(state, run.state0)
+
+
+def resume_config():
+  """16 steps with densification at 10, checkpoints at 8, a budget that must grow."""
+  return tiny_config("lowrank", **{
+      "model.init_points": 200, "model.max_gaussians": 256, "train.num_steps": 16,
+      "train.checkpoint_every": 8, "densify.start": 5, "densify.every": 5,
+      "densify.stop": 15, "render.max_intersections": 512, "loss.volume_stop_before_end": 2,
+      "loss.volume_every": 3})
+
+
+def test_resumed_run_matches_an_uninterrupted_one(tiny_dataset, tmp_path):
+  config = resume_config()
+  straight = loop.train(config, tiny_dataset.train, bounds=tiny_dataset.bounds)
+  assert straight.setup.step_config.settings.max_intersections > 512  # the budget grew
+  assert any("densify" in e for e in straight.history)
+
+  workdir = str(tmp_path / "run")
+  killed = loop.train(config, tiny_dataset.train, bounds=tiny_dataset.bounds,
+                      checkpoint_dir=os.path.join(workdir, "checkpoints"), stop_at=11)
+  assert int(killed.state.step) == 11  # "killed" at 11: steps 9-11 are lost, 1-8 saved
+  assert [os.path.basename(p) for p in ckpt.list_checkpoints(
+      os.path.join(workdir, "checkpoints"))] == ["ckpt_00000008.npz"]
+
+  resumed = loop.train_and_evaluate(config, workdir)  # resumes at 8, runs to 16, evaluates
+  assert int(resumed.step) == 16
+  for a, b in zip(jax.tree.leaves(straight.state), jax.tree.leaves(resumed), strict=True):
+    np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+
+  with open(os.path.join(workdir, "metrics.json")) as f:
+    metrics = json.load(f)
+  assert metrics["steps"] == 16 and np.isfinite(metrics["psnr"]) and 0 < metrics["ssim"] <= 1
+  images = os.listdir(os.path.join(workdir, "images"))
+  assert any(name.endswith("_uncertainty.png") for name in images)
+  assert any(name.endswith("_render.png") for name in images)
+  ply = read_ply(os.path.join(workdir, "point_cloud.ply"))
+  assert len(ply["x"]) == resumed.model.num_live
+  # Re-running a finished run only re-evaluates: nothing is trained twice.
+  again = loop.train_and_evaluate(config, workdir)
+  assert int(again.step) == 16
