@@ -5,7 +5,7 @@ them. LLVM's backend optimisation level 0 cuts that CPU time by about a third (m
 tests/test_render.py) without changing results: floating-point semantics are set by XLA's
 own flags, not by the LLVM pass pipeline. A user-provided XLA_FLAGS is respected.
 
-Compiled functions are shared through the library's module-level jits (`render_jit`,
+Compiled functions are shared through the library's module-level jits (`render`,
 `train_step_jit`, which take their settings as static arguments): tests that build equal
 configs reuse one compilation.
 """

@@ -20,7 +20,7 @@ import numpy as np
 from mfsample.camera import Camera
 from mfsample.data.views import Views
 from mfsample.gaussians import Gaussians
-from mfsample.render import render_jit
+from mfsample.render import render
 from mfsample.render.budget import render_with_budget
 from mfsample.render.settings import RenderSettings
 from mfsample.render.sh import rgb_to_sh_dc
@@ -105,7 +105,7 @@ def render_views(gaussians, cameras, background, settings=None, names=None):
   images, alphas, depths = [], [], []
   bg = jnp.asarray(background, jnp.float32)
   for i in range(len(cameras)):
-    out, settings = render_with_budget(render_jit, settings, gaussians, cameras[i],
+    out, settings = render_with_budget(render, settings, gaussians, cameras[i],
                                        background=bg)
     images.append(out.rgb)
     alphas.append(out.alpha)
