@@ -1,7 +1,7 @@
 """Active camera planning on NeRF Synthetic lego: the selection strategies on a fixed pool.
 
-Candidates = the 100 training views, test = the test split (every 4th of 200 views, at
-the same resolution). Lego has no ground-truth oracle for new poses, so the optimising
+Candidates = the 100 training views, test = the test split (every 4th of 200 views), at
+80 x 80. Lego has no ground-truth oracle for new poses, so the optimising
 variants (Opt. Sel., Opt. Rnd.) are not run (paper Sec. 5.1 does the same for Mip-NeRF
 360). Three seeds (initial view, initialisation, random choices).
 
@@ -18,12 +18,15 @@ def get_config():
   config.strategies = ("random", "farthest", "activenerf", "fisher", "acp", "ours_sel")
   config.data.kind = "blender"
   config.data.path = "../shared/data/lego"  # Relative to the repository root.
-  config.data.downscale = 4  # The files are 400 x 400: 100 x 100 images.
+  config.data.downscale = 5  # The files are 400 x 400: 80 x 80 images.
   config.data.test_every = 4  # 50 of the 200 test views.
   config.data.bounds = (-1.3, 1.3)  # NeRF Synthetic's cube of random initial points.
   for t in (config.round_train, config.final_train):
     t.data.extent = 4.4  # 1.1 x the camera distance (4.03).
     t.model.init_points = 3_000  # More pixels than the default scene's 64 x 64.
     t.render.max_intersections = 1 << 15
-  config.strategy.score_downscale = 2  # Candidates scored at 50 x 50.
+  config.rounds.first_steps = 240  # As camera_planning_results (authors: 2000 per camera).
+  config.rounds.steps = 120
+  config.final_train.train.num_steps = 600  # Authors: 7000.
+  config.strategy.score_downscale = 2  # Candidates scored at 40 x 40.
   return config

@@ -29,11 +29,13 @@ def get_config():
     t.model.max_gaussians = 512
     t.data.extent = 3.3
     t.render.max_intersections = 1 << 11
-  config.round_train.train.num_steps = 12
+  config.rounds.first_steps = 12
+  config.rounds.steps = 6
   config.final_train.train.num_steps = 12
   config.round_train.loss.volume_every = 3
-  config.strategy.optimize.steps = 4
-  config.strategy.optimize.z_drop_step = 2
+  config.strategy.optimize.steps = 12
+  config.strategy.optimize.lr = 1e-2
+  config.strategy.optimize.z_drop_step = 8
   config.strategy.activenerf.steps = 4
   config.strategy.fisher.train_probes = 2
   config.strategy.acp.resolution = 8

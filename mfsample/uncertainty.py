@@ -24,7 +24,7 @@ import chex
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jax.sharding import PartitionSpec
+from jax.sharding import AxisType, Mesh, PartitionSpec
 
 from mfsample import samplers
 from mfsample.camera import Camera
@@ -159,7 +159,9 @@ def map_cameras(fn, cameras: Camera, *args, chunk_size=1, num_devices=1):
   if num_devices == 1:
     out = local(cameras, *args)
   else:
-    mesh = jax.make_mesh((num_devices,), ("cams",), devices=jax.devices()[:num_devices])
+    # Auto axes: inside jit, XLA moves the (unsharded) inputs onto the mesh as needed.
+    mesh = Mesh(np.asarray(jax.devices()[:num_devices]), ("cams",),
+                axis_types=(AxisType.Auto,))
     replicated = tuple(jax.tree.map(lambda _: PartitionSpec(), a) for a in args)
     out = jax.shard_map(local, mesh=mesh, in_specs=(PartitionSpec("cams"),) + replicated,
                         out_specs=PartitionSpec("cams"), check_vma=False)(cameras, *args)

@@ -10,10 +10,10 @@ import functools
 import jax
 import jax.numpy as jnp
 import numpy as np
-from mfsample.model import GROUPS, SamplerSpec, init_model
 
 from configs import camera_planning_tiny
-from mfsample.planning import poses, training
+from mfsample.model import GROUPS, SamplerSpec, init_model
+from mfsample.planning import poses, runner
 from mfsample.planning.pool import make_pool
 
 BOUNDS = tuple((g, b) for g, b in zip(GROUPS, (1.0, 20.0, 2.0, 20.0, 0.5, 0.5), strict=True))
@@ -45,14 +45,15 @@ def random_model(kind="lowrank", *, num=80, spread=0.05, seed=0, dtype=jnp.float
 
 @functools.cache
 def trained_one_view(kind="lowrank", view=0):
-  """A model of the tiny config's round training, trained on candidate `view` alone."""
+  """`Trained` of the tiny config's first round (one training view): the same training, and
+  compilation, as the protocol's first round."""
   config = tiny_config()
   pool = tiny_pool()
-  cfg = config.round_train.copy_and_resolve_references()
-  with cfg.unlocked():
-    cfg.sampler.kind = kind
-  return training.train_on_views(cfg, pool.candidates.subset([view]), seed=0,
-                                 bounds=pool.bounds, pad_to=config.max_views)
+  trainer = runner.Trainer(config, pool)
+  sel = [runner.Selected(view, pool.candidates.cameras[view],
+                         np.asarray(pool.candidates.images[view]), 0.0, 0.0, {})]
+  return trainer.round_state("deterministic" if kind == "deterministic" else "stochastic",
+                             sel, 0)
 
 
 def opposite_uv(uv):

@@ -65,30 +65,28 @@ def test_sobol_samples_are_the_first_scrambled_points(model):
 
 
 def test_gradient_wrt_camera_matches_finite_differences():
+  # dU/d(u, v) on the camera sphere and dU/dxi of a free 6-DoF motion, against central
+  # differences in float64. The step is tiny on purpose: a splatted image has measure-zero
+  # discontinuities in the pose (two Gaussians swapping depth order, a footprint crossing
+  # its cut-off), and steps of 1e-6 .. 1e-3 cross some of them.
   with jax.enable_x64(True):
     m = random_model("lowrank", dtype=jnp.float64, num=40, spread=0.05, seed=3)
     z = unc.uncertainty_z(m, 2)
     sphere = SPHERE.replace(width=16, height=12)
     settings = RenderSettings(max_intersections=1 << 12)
 
-    def u_of(uv):
-      return unc.uncertainty(m, poses.spherical_camera(uv, sphere), z, settings=settings).value
+    @jax.jit
+    def u_of(params):
+      camera = poses.perturb_camera(poses.spherical_camera(params[:2], sphere), params[2:])
+      return unc.uncertainty(m, camera, z, settings=settings).value
 
-    uv = jnp.asarray([0.2, 0.35], jnp.float64)
-    grad = np.asarray(jax.grad(u_of)(uv))
-    eps = 1e-5
-    fd = np.array([(u_of(uv + eps * e) - u_of(uv - eps * e)) / (2 * eps)
-                   for e in np.eye(2)])
-    assert np.all(np.isfinite(grad))
-    np.testing.assert_allclose(grad, fd, rtol=2e-3, atol=1e-6 * np.abs(fd).max())
-
-    # And w.r.t. a free 6-DoF motion of the camera (tangent space), direction by direction.
-    cam = poses.spherical_camera(uv, sphere)
-    u_xi = lambda xi: unc.uncertainty(m, poses.perturb_camera(cam, xi), z,
-                                      settings=settings).value
-    g_xi = np.asarray(jax.grad(u_xi)(jnp.zeros(6)))
-    fd_xi = np.array([(u_xi(eps * e) - u_xi(-eps * e)) / (2 * eps) for e in np.eye(6)])
-    np.testing.assert_allclose(g_xi, fd_xi, rtol=2e-3, atol=1e-6 * np.abs(fd_xi).max())
+    params = jnp.asarray([0.2, 0.35, 0, 0, 0, 0, 0, 0], jnp.float64)
+    grad = np.asarray(jax.jit(jax.grad(u_of))(params))
+    eps = 1e-7
+    fd = np.array([(u_of(params + eps * e) - u_of(params - eps * e)) / (2 * eps)
+                   for e in np.eye(8)])
+    assert np.all(np.isfinite(grad)) and np.abs(grad).max() > 0
+    np.testing.assert_allclose(grad, fd, rtol=1e-4, atol=1e-6 * np.abs(fd).max())
 
 
 def test_one_training_view_opposite_view_is_more_uncertain():
@@ -121,7 +119,7 @@ def test_scores_match_single_camera_calls_for_any_chunk_size(model):
 def test_scoring_grows_the_budget_instead_of_truncating(model):
   z = unc.uncertainty_z(model, 2)
   cams = poses.spherical_camera(jnp.asarray([UV, UV + 0.2]), SPHERE)
-  tight = RenderSettings(max_intersections=512, chunk_size=32, chunks_per_step=16)
+  tight = RenderSettings(max_intersections=32, chunk_size=8, chunks_per_step=4)
   out, grown = unc.score_cameras(model, cams, z, settings=tight)
   assert grown.max_intersections > tight.max_intersections
   ref, _ = unc.score_cameras(model, cams, z, settings=SETTINGS)

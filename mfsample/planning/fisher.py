@@ -29,6 +29,7 @@ from typing import NamedTuple
 import chex
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from mfsample.model import activate
 from mfsample.render import RenderSettings, render
@@ -62,6 +63,22 @@ def rademacher(key, shape, dtype=jnp.float32):
   return jnp.where(jax.random.bernoulli(key, 0.5, shape), 1.0, -1.0).astype(dtype)
 
 
+def fisher_diagonal_from_probes(model, camera, probes, *, settings: RenderSettings,
+                                background, groups=DEFAULT_GROUPS):
+  """mean_k (J^T v_k)^2 over given probes v_k [K, H, W, 3] (K vector-Jacobian products).
+
+  With Rademacher probes this is an unbiased estimate of H = diag(J^T J); with the K = H W 3
+  unit vectors it is H / K exactly (`fisher_diagonal_exact`).
+
+  Returns:
+    ({group: [C, ...]}, `TileStats` of the render).
+  """
+  diff, image = _image_fn(model, camera, background, settings, groups)
+  _, vjp, stats = jax.vjp(image, diff, has_aux=True)
+  grads = jax.lax.map(lambda v: vjp(v)[0], probes)  # sequential: memory of one backward
+  return jax.tree.map(lambda g: jnp.mean(jnp.square(g), axis=0), grads), stats
+
+
 def fisher_diagonal(model, camera, key, *, num_probes, settings: RenderSettings, background,
                     groups=DEFAULT_GROUPS):
   """Unbiased estimate of H = diag(J^T J) of one camera with `num_probes` Rademacher probes.
@@ -78,22 +95,24 @@ def fisher_diagonal(model, camera, key, *, num_probes, settings: RenderSettings,
   Returns:
     ({group: [C, ...]} estimate of H, `TileStats` of the render).
   """
-  diff, image = _image_fn(model, camera, background, settings, groups)
-  rgb, vjp, stats = jax.vjp(image, diff, has_aux=True)
-  probes = rademacher(key, (num_probes,) + rgb.shape, rgb.dtype)
-  grads = jax.lax.map(lambda v: vjp(v)[0], probes)  # sequential: memory of one backward
-  return jax.tree.map(lambda g: jnp.mean(jnp.square(g), axis=0), grads), stats
+  shape = (num_probes, camera.height, camera.width, 3)
+  probes = rademacher(key, shape, model.params.mean["means"].dtype)
+  return fisher_diagonal_from_probes(model, camera, probes, settings=settings,
+                                     background=background, groups=groups)
 
 
 def fisher_diagonal_exact(model, camera, *, settings: RenderSettings, background,
                           groups=DEFAULT_GROUPS):
   """The exact H = sum over pixels and channels of (dI/dtheta)^2 (H W 3 backward passes).
 
-  Only for tiny images: the reference that `fisher_diagonal` is tested against.
+  Only for tiny images: the reference that the probe estimator is tested against.
   """
-  diff, image = _image_fn(model, camera, background, settings, groups)
-  jac = jax.jacrev(lambda p: image(p)[0])(diff)  # {group: [H, W, 3, C, ...]}
-  return jax.tree.map(lambda j: jnp.sum(jnp.square(j), axis=(0, 1, 2)), jac)
+  k = camera.height * camera.width * 3
+  basis = jnp.eye(k, dtype=model.params.mean["means"].dtype).reshape(
+      (k, camera.height, camera.width, 3))
+  h, _ = fisher_diagonal_from_probes(model, camera, basis, settings=settings,
+                                     background=background, groups=groups)
+  return jax.tree.map(lambda x: k * x, h)
 
 
 class FisherScores(NamedTuple):
@@ -114,18 +133,25 @@ class FisherScores(NamedTuple):
 
 @functools.partial(jax.jit, static_argnames=("settings", "num_probes", "train_probes",
                                              "groups", "num_devices"))
-def _fisher_scores(model, train_cameras, candidates, key, background, reg, *, settings,
-                   num_probes, train_probes, groups, num_devices):
+def _fisher_scores(model, train_cameras, train_weights, candidates, key, background, reg, *,
+                   settings, num_probes, train_probes, groups, num_devices):
   k_train, k_cand = jax.random.split(key)
   train_keys = jax.random.split(k_train, train_cameras.batch_shape[0])
 
   def train_one(inputs):
-    camera, k = inputs
-    return fisher_diagonal(model, camera, k, num_probes=train_probes, settings=settings,
-                           background=background, groups=groups)
+    camera, k, w = inputs
 
-  h_views, train_stats = jax.lax.map(train_one, (train_cameras, train_keys))
-  h_train = jax.tree.map(lambda h: jnp.sum(h, axis=0), h_views)
+    def compute(_):
+      return fisher_diagonal(model, camera, k, num_probes=train_probes, settings=settings,
+                             background=background, groups=groups)
+
+    def skip(_):  # a padding slot (weight 0): no backward passes
+      return jax.tree.map(lambda x: jnp.zeros(x.shape, x.dtype), jax.eval_shape(compute, None))
+
+    return jax.lax.cond(w > 0, compute, skip, None)
+
+  h_views, train_stats = jax.lax.map(train_one, (train_cameras, train_keys, train_weights))
+  h_train = jax.tree.map(lambda h: jnp.einsum("v,v...->...", train_weights, h), h_views)
   inverse = jax.tree.map(lambda h: 1.0 / (h + reg), h_train)
 
   def score_one(camera, inv):
@@ -142,7 +168,7 @@ def _fisher_scores(model, train_cameras, candidates, key, background, reg, *, se
 
 def fisher_scores(model, train_cameras, candidates, key, *, settings: RenderSettings,
                   background, num_probes=1, train_probes=8, reg=1e-6, groups=DEFAULT_GROUPS,
-                  num_devices=1, max_budget=1 << 24):
+                  num_devices=1, pad_to=None, max_budget=1 << 24):
   """FisherRF scores sum_d H_d(candidate) / (H_d(train) + reg) of every candidate.
 
   Args:
@@ -158,6 +184,8 @@ def fisher_scores(model, train_cameras, candidates, key, *, settings: RenderSett
     reg: lambda of the score (FisherRF: 1e-6).
     groups: parameter groups (FisherRF leaves out rotations).
     num_devices: devices to shard the candidates over.
+    pad_to: pad the training views to this many (zero weight), so that one compilation
+      serves every round of the protocol.
     max_budget: refuse to grow the budget beyond this.
 
   Returns:
@@ -165,8 +193,12 @@ def fisher_scores(model, train_cameras, candidates, key, *, settings: RenderSett
   """
   background = jnp.asarray(background, model.params.mean["means"].dtype)
   groups = tuple(g for g in groups if g in model.params.mean)
+  v = train_cameras.batch_shape[0]
+  slots = np.minimum(np.arange(max(v, pad_to or v)), v - 1)
+  weights = jnp.asarray(np.arange(len(slots)) < v, background.dtype)
+  train_cameras = train_cameras[slots]
   while True:
-    out = _fisher_scores(model, train_cameras, candidates, key, background, reg,
+    out = _fisher_scores(model, train_cameras, weights, candidates, key, background, reg,
                          settings=settings, num_probes=int(num_probes),
                          train_probes=int(train_probes), groups=groups,
                          num_devices=int(num_devices))

@@ -15,12 +15,14 @@ killed run resumes without redoing finished work; `results.json` and `table.md` 
 them, `cameras.png` and `landscape.png` show the chosen cameras and the uncertainty
 landscape (paper Fig. 7).
 
-Models are trained afresh per round as the authors do; identical trainings (the same kind,
-seed and views, e.g. the first round of the three "Ours" variants) are shared through an
-in-memory cache.
+Rounds either re-initialise the model (the authors' code) or continue training it on the
+enlarged view set (the paper's text: one run, a camera added every so many steps):
+`config.rounds.warm_start`. Identical trainings (the same kind, seed and views, e.g. the
+first round of the three "Ours" variants) are shared through an in-memory cache.
 """
 
 import collections
+import functools
 import hashlib
 import json
 import os
@@ -31,10 +33,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from mfsample import metrics as metrics_lib
 from mfsample import uncertainty as unc
 from mfsample.data.views import Views
+from mfsample.model import mean_gaussians
 from mfsample.planning import figures, poses, strategies, training, variance
 from mfsample.planning.pool import Pool, make_pool, stack_cameras
+from mfsample.render import render
+from mfsample.render.budget import fit_budget
 
 
 class Selected(NamedTuple):
@@ -83,11 +89,21 @@ def as_views(selected) -> Views:
 
 
 def round_config(config, kind):
-  """The training config of one round for a model kind (a copy)."""
+  """The training config of the rounds for a model kind (a copy).
+
+  Re-initialised rounds (the authors' code) train `rounds.steps` steps each. With
+  `rounds.warm_start` (the paper's text: one run, a camera added every so many steps) the
+  schedules span the whole run: `rounds.first_steps` + (max_views - 2) * `rounds.steps`.
+  """
   cfg = config.round_train.copy_and_resolve_references()
+  r = config.rounds
   with cfg.unlocked():
     if kind in ("deterministic", "variance"):
       cfg.sampler.kind = "deterministic"
+    if r.warm_start:
+      cfg.train.num_steps = int(r.first_steps) + (int(config.max_views) - 2) * int(r.steps)
+    else:
+      cfg.train.num_steps = int(r.steps)
   return cfg
 
 
@@ -98,7 +114,7 @@ class Trainer:
   `settings` remembers the render budgets that sufficed, so later calls start from them.
   """
 
-  def __init__(self, config, pool: Pool, cache_size=8):
+  def __init__(self, config, pool: Pool, cache_size=24):
     self.config = config
     self.pool = pool
     self.cache = collections.OrderedDict()
@@ -116,32 +132,54 @@ class Trainer:
       self.cache.popitem(last=False)
     return value
 
+  def round_state(self, base, selected, seed):
+    """`training.Trained` of a model of kind `base` after the round on `selected` (cached).
+
+    Warm start: the previous round's state (recursively) continued for `rounds.steps` more
+    steps on the larger view set; otherwise a fresh model trained `rounds.steps` steps.
+    """
+    keys = tuple(view_key(s) for s in selected)
+    r = self.config.rounds
+
+    def make():
+      cfg = round_config(self.config, base)
+      state, stop_at = None, int(r.steps)
+      if r.warm_start:
+        stop_at = int(r.first_steps)
+        if len(selected) > 1:
+          prev = self.round_state(base, selected[:-1], seed)
+          state, stop_at = prev.state, int(prev.state.step) + int(r.steps)
+      t0 = time.perf_counter()
+      trained = training.train_on_views(
+          cfg, as_views(selected), seed=seed, bounds=self.pool.bounds,
+          pad_to=self.config.max_views, settings=self.settings.get(("round", base)),
+          state=state, stop_at=stop_at)
+      self.train_seconds += time.perf_counter() - t0
+      self.settings[("round", base)] = trained.settings
+      return trained
+
+    return self._cached(("round", base, seed, keys), make)
+
   def round_model(self, kind, selected, seed):
-    """The model of `kind` trained on the `selected` views (cached)."""
+    """The model of `kind` for the round on the `selected` views (cached)."""
+    base = "deterministic" if kind == "variance" else kind
+    if kind != "variance":
+      return self.round_state(base, selected, seed).model
     keys = tuple(view_key(s) for s in selected)
 
     def make():
+      trained = self.round_state(base, selected, seed)
+      a = self.config.strategy.activenerf
       t0 = time.perf_counter()
-      base = "deterministic" if kind == "variance" else kind
-      cfg = round_config(self.config, base)
-      trained = self._cached(("model", base, seed, keys), lambda: training.train_on_views(
-          cfg, as_views(selected), seed=seed, bounds=self.pool.bounds,
-          pad_to=self.config.max_views, settings=self.settings.get(("round", base))))
-      self.settings[("round", base)] = trained.settings
-      model = trained.model
-      if kind == "variance":
-        a = self.config.strategy.activenerf
-        model, _ = variance.fit_variance(
-            model, as_views(selected), settings=trained.settings,
-            background=self.pool.background, steps=int(a.steps), lr=float(a.lr),
-            prior_var=float(a.prior_var), beta_min=float(a.beta_min),
-            prior_weight=float(a.prior_weight), seed=seed)
+      vmodel, _ = variance.fit_variance(
+          trained.model, as_views(selected), settings=trained.settings,
+          background=self.pool.background, steps=int(a.steps), lr=float(a.lr),
+          prior_var=float(a.prior_var), beta_min=float(a.beta_min),
+          prior_weight=float(a.prior_weight), seed=seed, pad_to=self.config.max_views)
       self.train_seconds += time.perf_counter() - t0
-      return model
+      return vmodel
 
-    if kind == "variance":
-      return self._cached(("variance", seed, keys), make)
-    return make()
+    return self._cached(("variance", seed, keys), make)
 
   def final_model(self, selected, seed):
     """The plain model of the final evaluation, trained on `selected` (cached)."""
@@ -149,9 +187,16 @@ class Trainer:
 
     def make():
       t0 = time.perf_counter()
-      trained = training.train_final(self.config.final_train, as_views(selected), seed=seed,
-                                     bounds=self.pool.bounds,
-                                     settings=self.settings.get("final"))
+      cfg = self.config.final_train
+      if cfg.densify.start >= cfg.train.num_steps:  # padded: one compilation for all counts
+        trained = training.train_on_views(cfg, as_views(selected), seed=seed,
+                                          bounds=self.pool.bounds,
+                                          pad_to=self.config.max_views,
+                                          settings=self.settings.get("final"))
+      else:
+        trained = training.train_final(cfg, as_views(selected), seed=seed,
+                                       bounds=self.pool.bounds,
+                                       settings=self.settings.get("final"))
       self.settings["final"] = trained.settings
       self.train_seconds += time.perf_counter() - t0
       return trained.model
@@ -159,13 +204,45 @@ class Trainer:
     return self._cached(("final", seed, keys), make)
 
 
-def evaluate_model(model, pool: Pool, config, lpips_fn, settings):
-  """Test metrics of a model: {"psnr", "ssim", "lpips"} means over `pool.test`."""
-  from mfsample.train.evaluate import evaluate
+@functools.partial(jax.jit, static_argnames=("settings",))
+def _render_views(model, cameras, background, *, settings):
+  """[V, H, W, 3] renders of the mean model (one after another: cheap budget skipping)."""
+  gaussians = mean_gaussians(model)
 
-  ev = evaluate(model, pool.test, background=pool.background, settings=settings,
-                lpips_fn=lpips_fn)
-  return {k: ev.metrics[k] for k in ("psnr", "ssim", "lpips")}
+  def one(camera):
+    out = render(gaussians, camera, background=background, settings=settings)
+    return jnp.clip(out.rgb, 0.0, 1.0), out.stats
+
+  return jax.lax.map(one, cameras)
+
+
+@jax.jit
+def _image_metrics(pred, gt):
+  """Per-view PSNR and SSIM of [V, H, W, 3] batches (`mfsample.metrics`)."""
+  return metrics_lib.psnr(pred, gt), metrics_lib.ssim(pred, gt)
+
+
+def evaluate_model(model, views: Views, *, background, settings, lpips_fn=None):
+  """Test metrics of a model's mean: {"psnr", "ssim", "lpips"}, means over `views`.
+
+  All views are rendered in one jitted call and scored in batches (PSNR and SSIM of
+  `mfsample.metrics`, LPIPS of `lpips_fn`), instead of one host round trip per view.
+
+  Returns:
+    (metrics dict, settings that sufficed).
+  """
+  bg = jnp.asarray(background, jnp.float32)
+  while True:
+    pred, stats = _render_views(model, views.cameras, bg, settings=settings)
+    if not bool(np.any(np.asarray(stats.overflow))):
+      break
+    settings = fit_budget(settings, stats)
+  gt = jnp.asarray(views.images, jnp.float32)
+  psnr, ssim = _image_metrics(pred, gt)
+  out = {"psnr": float(np.mean(psnr)), "ssim": float(np.mean(ssim)), "lpips": None}
+  if lpips_fn is not None:
+    out["lpips"] = float(np.mean(np.asarray(lpips_fn(pred, gt))))
+  return out, settings
 
 
 def plan_views(strategy, pool: Pool, config, seed, trainer: Trainer, budgets, on_round=None):
@@ -202,7 +279,8 @@ def plan_views(strategy, pool: Pool, config, seed, trainer: Trainer, budgets, on
     inputs = strategies.Inputs(
         model=model, train_cameras=stack_cameras([s.camera for s in selected]),
         candidates=cands.cameras, available=available, sphere=pool.sphere,
-        bounds=pool.bounds, background=pool.background, settings=dict(budgets))
+        bounds=pool.bounds, background=pool.background, settings=dict(budgets),
+        max_views=int(config.max_views))
     choice = strategy.select(inputs, jax.random.fold_in(key, len(selected)))
     budgets.update(choice.info.get("settings", {}))
     if choice.index is not None:
@@ -323,7 +401,6 @@ def run_camera_planning(config, workdir):
   rounds = int(config.max_views) - 1
   lpips_fn = None
   if config.eval.lpips_net:
-    from mfsample import metrics as metrics_lib
     lpips_fn = metrics_lib.make_lpips(config.eval.lpips_net)
   trainer = Trainer(config, pool)
   budgets = {}
@@ -345,8 +422,9 @@ def run_camera_planning(config, workdir):
     metrics = {}
     for n in eval_views:
       model = trainer.final_model(selected[:n], seed)
-      metrics[n] = evaluate_model(model, pool, config, lpips_fn,
-                                  trainer.settings.get("final"))
+      metrics[n], budgets["eval"] = evaluate_model(
+          model, pool.test, background=pool.background, lpips_fn=lpips_fn,
+          settings=budgets.get("eval") or trainer.settings.get("final"))
       bar.update(1)
     record = run_record(strategy, seed, selected, metrics, time.perf_counter() - t_run, pool)
     _write_json(path, record)
@@ -374,7 +452,7 @@ def run_camera_planning(config, workdir):
       "resolution": [int(pool.candidates.images.shape[2]),
                      int(pool.candidates.images.shape[1])],
       "num_candidates": len(pool.candidates), "num_test": len(pool.test),
-      "round_steps": int(config.round_train.train.num_steps),
+      "round_steps": int(config.rounds.steps), "warm_start": bool(config.rounds.warm_start),
       "final_steps": int(config.final_train.train.num_steps),
       "summary": summary, "runs": records,
       "seconds": {"total_this_call": time.perf_counter() - t_start, "pool": pool_seconds,

@@ -56,6 +56,8 @@ class Inputs(NamedTuple):
     background: RGB tuple.
     settings: {purpose: `RenderSettings`} budgets that sufficed before ("score",
       "optimize"); missing entries start from `RenderSettings()`.
+    max_views: the protocol's largest number of views: per-view arrays are padded to it so
+      that one compilation serves every round (None: no padding).
   """
 
   model: object
@@ -66,6 +68,7 @@ class Inputs(NamedTuple):
   bounds: tuple
   background: tuple
   settings: dict
+  max_views: int | None = None
 
 
 class Choice(NamedTuple):
@@ -157,13 +160,19 @@ def acp_strategy(cfg) -> Strategy:
   uniformity term), near (camera z below which cells are not seen).
   """
   directions = acp.fibonacci_directions(int(cfg.bins))
+  memo = {}  # the pool's observations, computed once (host-side, keyed by the poses)
 
   def select(inputs, key):
     del key
     points = acp.grid_points(*inputs.bounds, resolution=int(cfg.resolution))
     kw = dict(near=float(cfg.near))
     train = acp.observe(inputs.train_cameras, points, directions, **kw)
-    cands = acp.observe(inputs.candidates, points, directions, **kw)
+    pool_key = (np.asarray(inputs.candidates.world_to_camera).tobytes(),
+                np.asarray(points).tobytes())
+    if pool_key not in memo:
+      memo.clear()
+      memo[pool_key] = acp.observe(inputs.candidates, points, directions, **kw)
+    cands = memo[pool_key]
     gains = acp.acp_gains(train, cands, len(directions), weight=float(cfg.weight))
     return _pick(inputs, gains)
 
@@ -184,7 +193,8 @@ def fisher_strategy(cfg) -> Strategy:
         inputs.model, _small(inputs.train_cameras, cfg), _small(inputs.candidates, cfg), key,
         settings=_settings(inputs, "score"), background=inputs.background,
         num_probes=int(cfg.probes), train_probes=int(cfg.train_probes), reg=float(cfg.reg),
-        groups=tuple(cfg.groups), num_devices=unc.default_num_devices(len(inputs.available)))
+        groups=tuple(cfg.groups), num_devices=unc.default_num_devices(len(inputs.available)),
+        pad_to=inputs.max_views)
     return _pick(inputs, out.values, settings={"score": settings})
 
   return Strategy("fisher", "deterministic", False, select)

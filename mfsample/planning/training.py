@@ -11,6 +11,8 @@ initial state, the jitted step, budget growth on overflow) is the training modul
 For the same reason the config must fix what would otherwise change with the views and
 sits in the step's static settings: `data.extent` and `loss.volume_weight` (the authors
 use 1 / number of views; the planning configs state the constant they use instead).
+`train_on_views` can also continue from a previous state on a larger view set, for the
+paper's reading of the protocol (one training run, a camera added every so many steps).
 Rounds run without densification (`densify.start >= train.num_steps`); the final models
 (`train_final`) use `mfsample.train.train` itself, densification included.
 """
@@ -35,12 +37,14 @@ class Trained(NamedTuple):
     settings: `RenderSettings` whose budget sufficed (reuse it to avoid regrowth).
     seconds: wall-clock of the training loop (compilation included).
     loss: the last step's data loss.
+    state: the final `mfsample.train.TrainState` (to continue training from).
   """
 
   model: object
   settings: object
   seconds: float
   loss: float
+  state: object = None
 
 
 def _with_seed(config, seed):
@@ -57,8 +61,14 @@ def _box(bounds):
       np.asarray(high, np.float64), (3,))
 
 
-def train_on_views(config, views, *, seed, bounds, pad_to, settings=None) -> Trained:
-  """Trains a fresh model on `views` for `config.train.num_steps` steps (no densification).
+def train_on_views(config, views, *, seed, bounds, pad_to, settings=None, state=None,
+                   stop_at=None) -> Trained:
+  """Trains a model on `views` (no densification): fresh, or continuing from `state`.
+
+  The schedules (learning-rate decay, the volume term's last steps) follow
+  `config.train.num_steps`; `stop_at` ends the call earlier, so that training can continue
+  later from the returned state on more views (the paper's text: one run, a camera added
+  every so many steps).
 
   Args:
     config: a training config (`configs/train_default.py` layout) with `data.extent` and
@@ -68,6 +78,8 @@ def train_on_views(config, views, *, seed, bounds, pad_to, settings=None) -> Tra
     bounds: (low, high) box of the random initial point cloud.
     pad_to: number of image slots of the jitted step (the protocol's maximum views).
     settings: optional `RenderSettings` to start from (a budget that sufficed before).
+    state: optional `TrainState` to continue from (default: a fresh initial state).
+    stop_at: stop when this many steps are done in total (default: config.train.num_steps).
 
   Returns:
     `Trained`.
@@ -86,15 +98,17 @@ def train_on_views(config, views, *, seed, bounds, pad_to, settings=None) -> Tra
   if settings is not None:
     setup = setup._replace(step_config=dataclasses.replace(setup.step_config,
                                                            settings=settings))
-  state = init_state(config, setup, _box(bounds))
+  if state is None:
+    state = init_state(config, setup, _box(bounds))
+  end = setup.num_steps if stop_at is None else min(int(stop_at), setup.num_steps)
   slots = np.minimum(np.arange(pad_to), n - 1)  # padding repeats the last view, never drawn
   images = jnp.asarray(np.asarray(views.images)[slots], jnp.float32)
   cameras = views.cameras[slots]
   m = setup.step_config.num_samples
   step_fn = make_train_step(setup.step_config)
   start = time.perf_counter()
-  step, loss = 0, float("nan")
-  while step < setup.num_steps:
+  step, loss = int(state.step), float("nan")
+  while step < end:
     view = jnp.int32(view_for_step(config.seed, step, n))
     rows = setup.sobol[step * m:(step + 1) * m]
     new_state, metrics = step_fn(state, images, cameras, view, rows)
@@ -110,7 +124,8 @@ def train_on_views(config, views, *, seed, bounds, pad_to, settings=None) -> Tra
     state, step = new_state, step + 1
     loss = metrics.data_loss
   loss = float(loss)
-  return Trained(state.model, setup.step_config.settings, time.perf_counter() - start, loss)
+  return Trained(state.model, setup.step_config.settings, time.perf_counter() - start, loss,
+                 state)
 
 
 def train_final(config, views, *, seed, bounds, settings=None) -> Trained:

@@ -93,7 +93,7 @@ def _render_mean(model, camera, background, *, settings):
 
 
 def fit_variance(model, views, *, settings: RenderSettings, background, steps=60, lr=0.05,
-                 prior_var=0.05, beta_min=1e-3, prior_weight=1e-3, seed=0):
+                 prior_var=0.05, beta_min=1e-3, prior_weight=1e-3, seed=0, pad_to=None):
   """Fits the per-Gaussian log-variance of `model` on the training `views` (module doc).
 
   Args:
@@ -107,6 +107,8 @@ def fit_variance(model, views, *, settings: RenderSettings, background, steps=60
     beta_min: variance floor of every pixel.
     prior_weight: weight of the quadratic prior on s.
     seed: seed of the view order.
+    pad_to: pad the views to this many slots (never drawn), so that one compilation serves
+      every round of the protocol.
 
   Returns:
     (`VarianceModel`, losses [steps]).
@@ -120,7 +122,9 @@ def fit_variance(model, views, *, settings: RenderSettings, background, steps=60
                                        background)
     preds.append(out.rgb)
   order = np.random.default_rng([int(seed), 11]).integers(0, len(views), int(steps))
-  log_var, losses, overflow = _fit(model, images, jnp.stack(preds), views.cameras,
+  slots = np.minimum(np.arange(max(len(views), pad_to or 0)), len(views) - 1)
+  log_var, losses, overflow = _fit(model, images[slots], jnp.stack(preds)[slots],
+                                   views.cameras[slots],
                                    jnp.asarray(order, jnp.int32), jnp.asarray(beta_min, dtype),
                                    jnp.asarray(np.log(prior_var), dtype),
                                    jnp.asarray(prior_weight, dtype), settings=settings,
