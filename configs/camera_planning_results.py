@@ -2,8 +2,8 @@
 
 Same protocol and scale as `configs/camera_planning.py` (64 x 64 images, 2000 initial
 points), with 240 + 8 x 120 steps of round training and 600 final steps, so that the final
-models reflect the views more than their training noise. Takes a few hours on two busy CPU cores; run it
-in the background (it resumes where it stopped):
+models reflect the views more than their training noise. Takes a few hours on two busy CPU
+cores; run it in the background (it resumes where it stopped):
 
   PYTHONPATH=. nohup python experiments/camera_planning.py \
       --config=configs/camera_planning_results.py --workdir=workdirs/camera_planning_results &
