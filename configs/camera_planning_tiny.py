@@ -18,9 +18,10 @@ def get_config():
   config.data.num_test = 2
   config.data.background = (0.0, 0.0, 0.0)
   config.data.synthetic = s = config.data.__class__()
-  s.num_gaussians = 60  # Ground-truth Gaussians.
+  s.shape = "shell"  # Ground truth: an opaque shell ("shell") or a see-through "cloud".
+  s.num_gaussians = 150  # Ground-truth Gaussians.
   s.seed = 0  # Their seed.
-  s.radius = 0.5  # They live in [-radius, radius]^3.
+  s.radius = 0.5  # Radius of the shell (half-side of the cloud's cube).
   s.distance = 3.0  # Camera sphere radius.
   s.v_range = (0.1, 0.6)  # Polar band of the cameras (v = polar / pi).
   s.fov_x_deg = 40.0  # Horizontal field of view.
@@ -29,8 +30,9 @@ def get_config():
     t.model.max_gaussians = 512
     t.data.extent = 3.3
     t.render.max_intersections = 1 << 11
-  config.rounds.first_steps = 12
-  config.rounds.steps = 6
+  config.rounds.first_steps = 100
+  config.rounds.steps = 100
+  config.rounds.downscale = 1
   config.final_train.train.num_steps = 12
   config.round_train.loss.volume_every = 3
   config.strategy.optimize.steps = 12

@@ -102,8 +102,10 @@ def _blender_pool(cfg, background):
               poses.SphereSpec.from_cameras(candidates.cameras), None)
 
 
-def synthetic_scene(num, seed, radius=0.6, sh_degree=0):
-  """Random, fairly opaque ground-truth Gaussians in the cube [-radius, radius]^3."""
+def synthetic_scene(num, seed, radius=0.6, sh_degree=0, shape="shell"):
+  """Random ground-truth Gaussians: an opaque "shell" (on the sphere of `radius`: every view
+  sees one side of a closed surface and none sees through it) or a "cloud" (in the cube
+  [-radius, radius]^3)."""
   from mfsample.gaussians import Gaussians
   from mfsample.render.sh import rgb_to_sh_dc
 
@@ -111,19 +113,29 @@ def synthetic_scene(num, seed, radius=0.6, sh_degree=0):
   k = (sh_degree + 1) ** 2
   sh = np.zeros((num, k, 3), np.float32)
   sh[:, 0] = np.asarray(rgb_to_sh_dc(rng.uniform(0.05, 0.95, (num, 3))))
+  if shape == "shell":
+    means = rng.normal(size=(num, 3))
+    means *= radius / np.linalg.norm(means, axis=1, keepdims=True)
+    # Footprints that overlap into a closed surface: about 2x the mean spacing.
+    size = 2.0 * radius * np.sqrt(4.0 * np.pi / num)
+    scales = np.exp(rng.uniform(np.log(0.6 * size), np.log(size), (num, 3)))
+    opacities = rng.uniform(0.85, 0.99, num)
+  elif shape == "cloud":
+    means = rng.uniform(-radius, radius, (num, 3))
+    scales = np.exp(rng.uniform(np.log(0.03), np.log(0.12), (num, 3)))
+    opacities = rng.uniform(0.5, 0.95, num)
+  else:
+    raise ValueError(f"synthetic shape must be 'shell' or 'cloud', got {shape!r}")
   return Gaussians(
-      means=jnp.asarray(rng.uniform(-radius, radius, (num, 3)), jnp.float32),
-      scales=jnp.asarray(np.exp(rng.uniform(np.log(0.03), np.log(0.12), (num, 3))),
-                         jnp.float32),
+      means=jnp.asarray(means, jnp.float32), scales=jnp.asarray(scales, jnp.float32),
       quats=jnp.asarray(rng.normal(size=(num, 4)), jnp.float32),
-      opacities=jnp.asarray(rng.uniform(0.5, 0.95, num), jnp.float32),
-      sh=jnp.asarray(sh),
-  )
+      opacities=jnp.asarray(opacities, jnp.float32), sh=jnp.asarray(sh))
 
 
 def _synthetic_pool(cfg, background):
   s = cfg.synthetic
-  truth = synthetic_scene(int(s.num_gaussians), int(s.seed), radius=float(s.radius))
+  truth = synthetic_scene(int(s.num_gaussians), int(s.seed), radius=float(s.radius),
+                          shape=s.get("shape", "shell"))
   sphere = poses.SphereSpec(radius=float(s.distance), v_range=tuple(s.v_range),
                             fov_x=math.radians(float(s.fov_x_deg)), width=int(cfg.width),
                             height=int(cfg.height))

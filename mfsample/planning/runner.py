@@ -81,11 +81,23 @@ def view_key(sel: Selected):
   return ("p", hashlib.sha1(w2c.tobytes()).hexdigest()[:16])
 
 
-def as_views(selected) -> Views:
-  """`Views` of a list of `Selected`."""
-  return Views(np.stack([s.image for s in selected]).astype(np.float32),
-               stack_cameras([s.camera for s in selected]),
-               names=tuple(str(view_key(s)) for s in selected))
+def as_views(selected, downscale=1) -> Views:
+  """`Views` of a list of `Selected`, optionally `downscale` times smaller (box filter)."""
+  images = np.stack([s.image for s in selected]).astype(np.float32)
+  cameras = stack_cameras([s.camera for s in selected])
+  if downscale > 1:
+    images = downscale_images(images, downscale)
+    cameras = poses.downscale_camera(cameras, downscale)
+  return Views(images, cameras, names=tuple(str(view_key(s)) for s in selected))
+
+
+def downscale_images(images, factor):
+  """[..., H, W, C] -> [..., H / f, W / f, C], averaging f x f blocks (H, W divisible by f)."""
+  *lead, h, w, c = images.shape
+  if h % factor or w % factor:
+    raise ValueError(f"image size {w}x{h} is not divisible by {factor}")
+  blocks = images.reshape(*lead, h // factor, factor, w // factor, factor, c)
+  return blocks.mean(axis=(-4, -2))
 
 
 def round_config(config, kind):
@@ -151,7 +163,7 @@ class Trainer:
           state, stop_at = prev.state, int(prev.state.step) + int(r.steps)
       t0 = time.perf_counter()
       trained = training.train_on_views(
-          cfg, as_views(selected), seed=seed, bounds=self.pool.bounds,
+          cfg, as_views(selected, int(r.downscale)), seed=seed, bounds=self.pool.bounds,
           pad_to=self.config.max_views, settings=self.settings.get(("round", base)),
           state=state, stop_at=stop_at)
       self.train_seconds += time.perf_counter() - t0
@@ -172,7 +184,8 @@ class Trainer:
       a = self.config.strategy.activenerf
       t0 = time.perf_counter()
       vmodel, _ = variance.fit_variance(
-          trained.model, as_views(selected), settings=trained.settings,
+          trained.model, as_views(selected, int(self.config.rounds.downscale)),
+          settings=trained.settings,
           background=self.pool.background, steps=int(a.steps), lr=float(a.lr),
           prior_var=float(a.prior_var), beta_min=float(a.beta_min),
           prior_weight=float(a.prior_weight), seed=seed, pad_to=self.config.max_views)
