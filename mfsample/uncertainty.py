@@ -75,25 +75,26 @@ def uncertainty_z(model, num_samples, seed=0):
 
 
 def uncertainty_of_samples(gaussians_m, camera: Camera, *, settings: RenderSettings,
-                           background) -> Uncertainty:
+                           background, num_devices=1) -> Uncertainty:
   """U of `camera` for M sampled `Gaussians` (leading [M] axis on every leaf).
 
   The samples are rendered one after another (`lax.map`): unvmapped, each render skips the
-  unused part of its intersection budget, and memory holds one render at a time.
+  unused part of its intersection budget, and memory holds one render at a time. With
+  `num_devices` > 1 they are split over the devices instead (`map_sharded`).
   """
   def one(g):
     out = render(g, camera, background=background, settings=settings)
     return out.rgb, out.stats
 
-  rgbs, stats = jax.lax.map(one, gaussians_m)
+  rgbs, stats = map_sharded(one, gaussians_m, num_devices=num_devices)
   pmap = pixel_variance(rgbs)
   return Uncertainty(value=jnp.sum(pmap), pixel_map=pmap, rgb_mean=jnp.mean(rgbs, axis=0),
                      stats=stats)
 
 
-@functools.partial(jax.jit, static_argnames=("settings",))
+@functools.partial(jax.jit, static_argnames=("settings", "num_devices"))
 def uncertainty(model, camera: Camera, z, *, settings: RenderSettings = RenderSettings(),
-                background=None) -> Uncertainty:
+                background=None, num_devices=1) -> Uncertainty:
   """U of a stochastic model seen from one camera (Eq. 10), and its per-pixel map.
 
   Differentiable w.r.t. the camera (and the model): e.g.
@@ -106,6 +107,7 @@ def uncertainty(model, camera: Camera, z, *, settings: RenderSettings = RenderSe
     settings: `RenderSettings` (static). Check `stats.overflow`: an overflowing render is
       incomplete; grow the budget (`mfsample.render.budget.fit_budget`) and call again.
     background: [3] colour behind the Gaussians (default black).
+    num_devices: devices to split the M samples over (static).
 
   Returns:
     `Uncertainty`.
@@ -113,59 +115,65 @@ def uncertainty(model, camera: Camera, z, *, settings: RenderSettings = RenderSe
   if background is None:
     background = jnp.zeros((3,), model.params.mean["means"].dtype)
   return uncertainty_of_samples(sample_gaussians(model, z), camera, settings=settings,
-                                background=background)
+                                background=background, num_devices=num_devices)
 
 
-# ------------------------------------------------------------------ batches of cameras
+# ------------------------------------------------------------------ batches, devices
 
 
-def map_cameras(fn, cameras: Camera, *args, chunk_size=1, num_devices=1):
-  """fn(camera, *args) for every camera of a batch; call inside `jax.jit`.
+def map_sharded(fn, xs, *args, chunk_size=1, num_devices=1):
+  """fn(x, *args) for every x of a batch `xs` (a pytree with a leading axis); inside jit.
 
-  Cameras are processed `chunk_size` at a time (`jax.lax.map` with a vmapped chunk), so
-  memory holds one chunk. With `num_devices` > 1 the cameras are split over the first
-  `num_devices` devices with `jax.shard_map` (args replicated) and each device maps over its
-  share. The batch is padded with copies of its last camera to a multiple of
-  num_devices * chunk_size; the padding is dropped from the result.
+  The batch is processed `chunk_size` at a time (`jax.lax.map` with a vmapped chunk), so
+  memory holds one chunk. With `num_devices` > 1 it is split over the first `num_devices`
+  devices with `jax.shard_map` (args replicated) and each device maps over its share. The
+  batch is padded with copies of its last element to a multiple of num_devices *
+  chunk_size; the padding is dropped from the result.
 
-  Under vmap (chunk_size > 1) the renderer cannot skip unused budget, so chunk_size = 1 is
-  the cheaper choice on a CPU; larger chunks pay off on accelerators.
+  Under vmap (chunk_size > 1) the renderer skips unused budget only as far as the whole
+  chunk allows; chunk_size = 1 is the safe choice on a CPU, larger chunks pay off on
+  accelerators.
 
   Args:
-    fn: (unbatched Camera, *args) -> pytree of arrays.
-    cameras: `Camera` batched over one axis [B].
+    fn: (one element of xs, *args) -> pytree of arrays.
+    xs: pytree whose leaves share a leading axis [B] (a batched `Camera`, M `Gaussians`).
     *args: replicated arguments (pytrees).
-    chunk_size: cameras vmapped together.
-    num_devices: devices to shard the cameras over (static).
+    chunk_size: elements vmapped together.
+    num_devices: devices to shard the batch over (static).
 
   Returns:
     fn's pytree with a leading [B] axis.
   """
-  if len(cameras.batch_shape) != 1:
-    raise ValueError(f"map_cameras takes a Camera batched over one axis, got "
-                     f"{cameras.batch_shape}")
-  b = cameras.batch_shape[0]
+  b = jax.tree.leaves(xs)[0].shape[0]
   per_device = chunk_size * math.ceil(b / (num_devices * chunk_size))
   total = per_device * num_devices
   if total != b:
     idx = jnp.minimum(jnp.arange(total), b - 1)
-    cameras = jax.tree.map(lambda x: x[idx], cameras)
+    xs = jax.tree.map(lambda x: x[idx], xs)
 
-  def local(cams, *a):
+  def local(batch, *a):
     # batch_size=1 would still vmap (over a unit axis) and lose the renderer's skipping.
-    batch = None if chunk_size == 1 else chunk_size
-    return jax.lax.map(lambda c: fn(c, *a), cams, batch_size=batch)
+    size = None if chunk_size == 1 else chunk_size
+    return jax.lax.map(lambda x: fn(x, *a), batch, batch_size=size)
 
   if num_devices == 1:
-    out = local(cameras, *args)
+    out = local(xs, *args)
   else:
     # Auto axes: inside jit, XLA moves the (unsharded) inputs onto the mesh as needed.
-    mesh = Mesh(np.asarray(jax.devices()[:num_devices]), ("cams",),
+    mesh = Mesh(np.asarray(jax.devices()[:num_devices]), ("batch",),
                 axis_types=(AxisType.Auto,))
-    replicated = tuple(jax.tree.map(lambda _: PartitionSpec(), a) for a in args)
-    out = jax.shard_map(local, mesh=mesh, in_specs=(PartitionSpec("cams"),) + replicated,
-                        out_specs=PartitionSpec("cams"), check_vma=False)(cameras, *args)
+    specs = (PartitionSpec("batch"),) + (PartitionSpec(),) * len(args)
+    out = jax.shard_map(local, mesh=mesh, in_specs=specs, out_specs=PartitionSpec("batch"),
+                        check_vma=False)(xs, *args)
   return jax.tree.map(lambda x: x[:b], out)
+
+
+def map_cameras(fn, cameras: Camera, *args, chunk_size=1, num_devices=1):
+  """`map_sharded` over a `Camera` batched over one axis [B]: fn(camera, *args) each."""
+  if len(cameras.batch_shape) != 1:
+    raise ValueError(f"map_cameras takes a Camera batched over one axis, got "
+                     f"{cameras.batch_shape}")
+  return map_sharded(fn, cameras, *args, chunk_size=chunk_size, num_devices=num_devices)
 
 
 class CameraScores(NamedTuple):

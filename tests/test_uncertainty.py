@@ -152,11 +152,17 @@ _SHARDED = textwrap.dedent("""
     four, _ = unc.score_cameras(m, cams, z, settings=s, num_devices=4)
     np.testing.assert_allclose(np.asarray(four.values), np.asarray(one.values), rtol=1e-5)
     assert unc.default_num_devices(6) == 4 and unc.default_num_devices(2) == 2
+    # The M samples of one camera split over devices (M = 3 padded to 4).
+    z3 = unc.uncertainty_z(m, 3)
+    a = unc.uncertainty(m, cams[0], z3, settings=s, num_devices=1)
+    b = unc.uncertainty(m, cams[0], z3, settings=s, num_devices=4)
+    np.testing.assert_allclose(np.asarray(b.pixel_map), np.asarray(a.pixel_map), rtol=1e-5,
+                               atol=1e-9)
     print("SHARDED_OK", np.asarray(four.values).sum())
 """)
 
 
-def test_candidate_scoring_shards_over_devices():
+def test_candidate_scoring_and_samples_shard_over_devices():
   here = os.path.dirname(__file__)
   env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=4",
              PYTHONPATH=os.pathsep.join([os.path.dirname(here), here]), JAX_PLATFORMS="cpu")

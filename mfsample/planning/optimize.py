@@ -25,7 +25,7 @@ import optax
 from mfsample.planning import poses
 from mfsample.render.budget import BudgetExceededError, fit_budget
 from mfsample.render.settings import RenderSettings
-from mfsample.uncertainty import sample_gaussians, uncertainty_of_samples
+from mfsample.uncertainty import default_num_devices, sample_gaussians, uncertainty_of_samples
 
 
 @dataclasses.dataclass(frozen=True)
@@ -73,12 +73,14 @@ def _z_scales(opt: OptimizeSettings, dtype):
   return jnp.asarray(np.where(steps >= opt.z_drop_step, opt.z_drop_scale, 1.0), dtype)
 
 
-def _run(model, params0, z, background, camera_fn, project, optimizer, opt, settings):
-  """The scanned Adam loop on -U(camera_fn(params))."""
+def _run(model, params0, z, background, camera_fn, project, optimizer, opt, settings,
+         num_devices):
+  """The scanned Adam loop on -U(camera_fn(params)); the M samples split over devices."""
 
   def neg_u(params, z_scale):
     g = sample_gaussians(model, z * z_scale)
-    u = uncertainty_of_samples(g, camera_fn(params), settings=settings, background=background)
+    u = uncertainty_of_samples(g, camera_fn(params), settings=settings, background=background,
+                               num_devices=num_devices)
     return -u.value, u.stats
 
   def step(carry, z_scale):
@@ -95,21 +97,21 @@ def _run(model, params0, z, background, camera_fn, project, optimizer, opt, sett
   return params, values, trajectory, jnp.max(num_padded), jnp.any(overflow)
 
 
-@functools.partial(jax.jit, static_argnames=("sphere", "opt", "settings"))
-def _spherical(model, uv0, z, background, *, sphere, opt, settings):
+@functools.partial(jax.jit, static_argnames=("sphere", "opt", "settings", "num_devices"))
+def _spherical(model, uv0, z, background, *, sphere, opt, settings, num_devices):
   optimizer = optax.adam(opt.lr)
   return _run(model, uv0, z, background, lambda uv: poses.spherical_camera(uv, sphere),
-              lambda uv: poses.project_uv(uv, sphere), optimizer, opt, settings)
+              lambda uv: poses.project_uv(uv, sphere), optimizer, opt, settings, num_devices)
 
 
-@functools.partial(jax.jit, static_argnames=("opt", "settings"))
-def _se3(model, camera0, z, background, *, opt, settings):
+@functools.partial(jax.jit, static_argnames=("opt", "settings", "num_devices"))
+def _se3(model, camera0, z, background, *, opt, settings, num_devices):
   # Rotation and translation differ in units: one learning rate each.
   lrs = jnp.asarray([opt.se3_lr_rotation] * 3 + [opt.se3_lr_translation] * 3, z.dtype)
   optimizer = _per_coordinate_adam(lrs)
   xi0 = jnp.zeros((6,), z.dtype)
   return _run(model, xi0, z, background, lambda xi: poses.perturb_camera(camera0, xi),
-              lambda xi: xi, optimizer, opt, settings)
+              lambda xi: xi, optimizer, opt, settings, num_devices)
 
 
 def _per_coordinate_adam(lrs):
@@ -143,7 +145,7 @@ class _Padded(NamedTuple):
 
 def optimize_spherical(model, uv0, z, *, sphere: poses.SphereSpec, opt=OptimizeSettings(),
                        settings: RenderSettings = RenderSettings(), background=None,
-                       max_budget=1 << 24) -> OptimizeResult:
+                       num_devices=None, max_budget=1 << 24) -> OptimizeResult:
   """Maximises U over the camera sphere from (u, v) = `uv0` (Ours (Opt. Sel. / Rnd.)).
 
   Args:
@@ -154,6 +156,8 @@ def optimize_spherical(model, uv0, z, *, sphere: poses.SphereSpec, opt=OptimizeS
     opt: `OptimizeSettings`.
     settings: starting `RenderSettings` (grown on overflow).
     background: [3] colour (default black).
+    num_devices: devices to split the M samples over (default: as many as there are samples
+      and devices).
     max_budget: refuse to grow the render budget beyond this.
 
   Returns:
@@ -162,15 +166,16 @@ def optimize_spherical(model, uv0, z, *, sphere: poses.SphereSpec, opt=OptimizeS
   dtype = model.params.mean["means"].dtype
   background = jnp.zeros((3,), dtype) if background is None else jnp.asarray(background, dtype)
   uv0 = poses.project_uv(jnp.asarray(uv0, dtype), sphere)
+  n = default_num_devices(z.shape[0]) if num_devices is None else int(num_devices)
   (params, values, traj), settings = _with_budget(
-      lambda s: _spherical(model, uv0, z, background, sphere=sphere, opt=opt, settings=s),
-      settings, max_budget)
+      lambda s: _spherical(model, uv0, z, background, sphere=sphere, opt=opt, settings=s,
+                           num_devices=n), settings, max_budget)
   return OptimizeResult(poses.spherical_camera(params, sphere), params, values, traj, settings)
 
 
 def optimize_se3(model, camera0, z, *, opt=OptimizeSettings(),
                  settings: RenderSettings = RenderSettings(), background=None,
-                 max_budget=1 << 24) -> OptimizeResult:
+                 num_devices=None, max_budget=1 << 24) -> OptimizeResult:
   """Maximises U over free 6-DoF poses near `camera0` (tangent-space Adam on xi).
 
   Unlike the spherical parameterisation nothing keeps the camera pointed at the scene or at
@@ -181,6 +186,8 @@ def optimize_se3(model, camera0, z, *, opt=OptimizeSettings(),
   """
   dtype = model.params.mean["means"].dtype
   background = jnp.zeros((3,), dtype) if background is None else jnp.asarray(background, dtype)
+  n = default_num_devices(z.shape[0]) if num_devices is None else int(num_devices)
   (params, values, traj), settings = _with_budget(
-      lambda s: _se3(model, camera0, z, background, opt=opt, settings=s), settings, max_budget)
+      lambda s: _se3(model, camera0, z, background, opt=opt, settings=s, num_devices=n),
+      settings, max_budget)
   return OptimizeResult(poses.perturb_camera(camera0, params), params, values, traj, settings)
