@@ -173,6 +173,46 @@ def main(argv):
   with open(_OUT.value, "w") as fh:
     json.dump(summary, fh, indent=2)
   print(f"saved {_OUT.value}")
+  if len(rows) >= 3:
+    _plot(summary, os.path.splitext(_OUT.value)[0] + ".png")
+
+
+def _plot(summary, path):
+  """Time against intersections, with the linear fits: the scaling claim as a picture."""
+  try:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+  except ImportError:
+    print("matplotlib not installed: no plot")
+    return
+  import numpy as np
+
+  rows = summary["cells"]
+  x = np.array([r["intersections"] for r in rows], float)
+  fig, ax = plt.subplots(figsize=(6, 4))
+  for key, fit_key, label in (("forward_ms", "fit_forward", "forward"),
+                              ("forward_backward_ms", "fit_forward_backward",
+                               "forward + backward")):
+    y = np.array([r[key] for r in rows])
+    (line,) = ax.plot(x / 1e3, y, "o", label=label)
+    fit = summary[fit_key]
+    xs = np.linspace(0, x.max(), 50)
+    ax.plot(xs / 1e3, fit["intercept_ms"] + fit["ms_per_1k_intersections"] * xs / 1e3, "-",
+            color=line.get_color(), alpha=0.6,
+            label=f"fit: {fit['ms_per_1k_intersections']:.2f} ms / 1k, R2 {fit['r2']:.3f}")
+  for r in rows:
+    ax.annotate(f"{r['num_gaussians'] // 1000}k@{r['resolution']}",
+                (r["intersections"] / 1e3, r["forward_backward_ms"]), fontsize=7,
+                textcoords="offset points", xytext=(3, 3))
+  ax.set_xlabel("tile intersections (thousands)")
+  ax.set_ylabel("milliseconds (median)")
+  ax.set_title(f"render time vs intersections ({summary['machine']['device']})")
+  ax.legend(fontsize=8)
+  fig.tight_layout()
+  fig.savefig(path, dpi=120)
+  print(f"saved {path}")
 
 
 if __name__ == "__main__":

@@ -24,6 +24,7 @@ from typing import NamedTuple
 import chex
 import jax
 import jax.numpy as jnp
+from jax.custom_batching import custom_vmap
 
 from mfsample.render.tiles import TileLayout, tile_grid
 
@@ -125,8 +126,11 @@ def composite(layout: TileLayout, means2d, conics, opacities, features, width, h
       return carry, (jnp.zeros((steps_g, p, features.shape[-1]), dtype),
                      jnp.zeros((steps_g, p), dtype))
 
-    return jax.lax.cond(step * steps_g < layout.num_chunks, blend_step, skip, carry, x)
+    return jax.lax.cond(step * steps_g < chunks_in_use, blend_step, skip, carry, x)
 
+  # Under vmap (M samples, many cameras) the skip test must stay a real branch, not a
+  # select that computes every step: it uses the largest chunk count in the batch.
+  chunks_in_use = _max_over_batch(layout.num_chunks)
   init = (jnp.int32(-1), jnp.zeros((ts * ts,), dtype))
   _, (blended, coverage) = jax.lax.scan(maybe_blend, init, (step_ids, xs))
 
@@ -140,6 +144,22 @@ def composite(layout: TileLayout, means2d, conics, opacities, features, width, h
   image = _tiles_to_image(blended[:num_tiles], tiles_x, tiles_y, ts, width, height)
   alpha = _tiles_to_image(coverage[:num_tiles, :, None], tiles_x, tiles_y, ts, width, height)
   return image, alpha[..., 0]
+
+
+@custom_vmap
+def _max_over_batch(n):
+  """Identity on one value; under `jax.vmap`, the maximum over the batch, unbatched.
+
+  This keeps `lax.cond` a true branch when `render` is vmapped: a batched predicate would
+  turn it into a select that evaluates (and wastes) every step of the loop.
+  """
+  return n
+
+
+@_max_over_batch.def_vmap
+def _max_over_batch_rule(axis_size, in_batched, n):
+  del axis_size, in_batched
+  return jnp.max(n), False
 
 
 def _tiles_to_image(tiles, tiles_x, tiles_y, ts, width, height):
