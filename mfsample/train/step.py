@@ -193,7 +193,7 @@ def train_step(state: TrainState, images, cameras, view, sobol_rows, *, cfg: Ste
   new_state = TrainState(step + 1, new_model, opt_state, new_stats, state.key)
 
   overflow = jnp.any(stats.overflow)
-  new_state = jax.tree.map(lambda old, new: jnp.where(overflow, old, new), state, new_state)
+  new_state = jax.lax.cond(overflow, lambda: state, lambda: new_state)
   metrics = StepMetrics(loss=loss, data_loss=data, volume=volume, overflow=overflow,
                         num_padded=jnp.max(stats.num_padded))
   return new_state, metrics
