@@ -28,10 +28,12 @@ def get_config():
   data.height = 128  # scene: image height in pixels.
   data.num_train = 100  # scene: training (candidate) cameras.
   data.num_test = 50  # scene: test cameras.
-  data.spp = 64  # scene: Mitsuba samples per pixel of a capture.
-  data.cache_dir = ".cache/captures"  # scene: capture cache (relative to the repo root).
+  data.spp = config_dict.placeholder(int)  # scene: samples per pixel (None: the default).
+  data.cache_dir = config_dict.placeholder(str)  # scene: capture cache (None: the default).
   data.background = (1.0, 1.0, 1.0)  # Colour behind the Gaussians, as in the images.
-  data.init_bounds = (-1.3, 1.3)  # Cube of the random initial point cloud (NeRF Synthetic).
+  # Cube of the random initial point cloud (NeRF Synthetic; kind "scene" uses the cube
+  # around the scene's bounding sphere instead).
+  data.init_bounds = (-1.3, 1.3)
   data.extent = config_dict.placeholder(float)  # Scene extent; None: from the cameras (3DGS).
   data.synthetic = syn = ml_collections.ConfigDict()  # kind "synthetic": random Gaussians.
   syn.num_gaussians = 200  # Ground-truth Gaussians of the synthetic scene.

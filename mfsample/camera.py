@@ -69,8 +69,9 @@ class Camera:
     def intrinsic(v):
       return jnp.broadcast_to(jnp.asarray(v, dtype=w2c.dtype), batch)
 
+    as_int = lambda v: int(v) if isinstance(v, np.integer) else v  # validated on init
     return cls(w2c, intrinsic(fx), intrinsic(fy), intrinsic(cx), intrinsic(cy),
-               int(width), int(height))
+               as_int(width), as_int(height))
 
   @classmethod
   def look_at(cls, eye, target, up, fov_x, width, height):

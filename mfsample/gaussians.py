@@ -90,6 +90,6 @@ def sh_degree_from_size(k):
   """K = (degree + 1)^2 -> degree; ValueError unless K is 1, 4, 9 or 16."""
   degree = math.isqrt(k) - 1
   if (degree + 1) ** 2 != k or not 0 <= degree <= 3:
-    raise ValueError(f"The SH axis must hold (degree + 1)^2 coefficients with degree 0..3 "
-                     f"(1, 4, 9 or 16); got {k}.")
+    raise ValueError(f"The SH axis must hold (degree + 1)^2 coefficients, a square for "
+                     f"degree 0..3 (1, 4, 9 or 16); got {k}.")
   return degree

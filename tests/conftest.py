@@ -1,14 +1,27 @@
-"""Shared fixtures: a tiny synthetic scene rendered once per test session.
+"""Test-session setup.
 
-Compiled functions are shared through the library's module-level jits (`render_jit`,
-`train_step_jit`, which take their settings as static arguments): tests that build equal
-configs reuse one compilation.
+The suite is dominated by XLA compilation of many small, distinct programs, not by running
+them. LLVM's backend optimisation level 0 cuts that CPU time by about a third (measured on
+tests/test_render.py) without changing results: floating-point semantics are set by XLA's
+own flags, not by the LLVM pass pipeline. A user-provided XLA_FLAGS is respected.
 """
 
-import pytest
+import os
 
-from configs import train_synthetic
-from mfsample.train import data as data_lib
+if "xla_backend_optimization_level" not in os.environ.get("XLA_FLAGS", ""):
+  os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "")
+                             + " --xla_backend_optimization_level=0").strip()
+
+
+# ------------------------------------------------------------------------- training fixtures
+# A tiny synthetic scene rendered once per session. Compiled functions are shared through the
+# library's module-level jits (`render`, `train_step_jit`, which take their settings as
+# static arguments): tests that build equal configs reuse one compilation.
+
+import pytest  # noqa: E402
+
+from configs import train_synthetic  # noqa: E402
+from mfsample.train import data as data_lib  # noqa: E402
 
 
 def tiny_config(kind="lowrank", **overrides):

@@ -13,7 +13,7 @@ from conftest import tiny_config
 from mfsample import samplers
 from mfsample.export_ply import read_ply
 from mfsample.model import mean_gaussians
-from mfsample.render import render_jit
+from mfsample.render import render
 from mfsample.train import checkpoint as ckpt
 from mfsample.train import data as data_lib
 from mfsample.train import densify as densify_lib
@@ -128,8 +128,8 @@ def test_padding_never_changes_a_render_nor_receives_updates(runs):
   camera = run.views.cameras[0]
   z = jnp.asarray(samplers.sobol_z(1, 2, seed=0)[0])
   settings = run.setup.step_config.settings
-  ref = render_jit(samplers.sample(model, z), camera, settings=settings)
-  out = render_jit(samplers.sample(wild_model, z), camera, settings=settings)
+  ref = render(samplers.sample(model, z), camera, settings=settings)
+  out = render(samplers.sample(wild_model, z), camera, settings=settings)
   np.testing.assert_array_equal(np.asarray(out.rgb), np.asarray(ref.rgb))
 
   wild_state = state._replace(model=wild_model)
@@ -236,7 +236,7 @@ def test_render_for_training_matches_render(runs):
   camera = run.views.cameras[1]
   settings = run.setup.step_config.settings
   bg = jnp.asarray([0.2, 0.3, 0.4])
-  ref = render_jit(g, camera, background=bg, settings=settings)
+  ref = render(g, camera, background=bg, settings=settings)
   out = jax.jit(render_for_training, static_argnames="settings")(
       g, camera, jnp.zeros((g.num_gaussians, 2)), background=bg, settings=settings)
   np.testing.assert_array_equal(np.asarray(out.rgb), np.asarray(ref.rgb))

@@ -17,6 +17,9 @@ class Views(NamedTuple):
     alphas: [V, H, W] float32 coverage in [0, 1], or None when unknown.
     depths: [V, H, W] float32 metric camera z-depth (0 where nothing was hit), or None.
     names: V strings identifying the frames (file stems or capture keys).
+    depth_codes: [V, H, W] float32 in [0, 1], or None: a dataset's *non-metric* depth
+      encoding as stored (NeRF Synthetic's `*_depth_0001.png`: normalised and inverted,
+      0 on the background). Not metres; good only for rank-based checks.
   """
 
   images: chex.Array
@@ -24,9 +27,15 @@ class Views(NamedTuple):
   alphas: chex.Array | None = None
   depths: chex.Array | None = None
   names: tuple = ()
+  depth_codes: chex.Array | None = None
 
   def __len__(self):
     return self.images.shape[0]
+
+  def replace(self, **changes):
+    """A copy with some fields changed. (NamedTuple's `_replace` fails on Views: it checks
+    len() against the number of fields, and `__len__` here counts views.)"""
+    return Views(**{**self._asdict(), **changes})
 
   def subset(self, indices):
     """The views at `indices` (a sequence of ints), in that order."""
@@ -34,4 +43,4 @@ class Views(NamedTuple):
     pick = lambda x: None if x is None else x[idx]
     names = tuple(self.names[i] for i in idx) if self.names else ()
     return Views(self.images[idx], self.cameras[idx], pick(self.alphas), pick(self.depths),
-                 names)
+                 names, pick(self.depth_codes))

@@ -24,6 +24,7 @@ from typing import NamedTuple
 import chex
 import jax
 import jax.numpy as jnp
+from jax.custom_batching import custom_vmap
 
 from mfsample.render.tiles import TileLayout, tile_grid
 
@@ -78,37 +79,39 @@ def composite(layout: TileLayout, means2d, conics, opacities, features, width, h
   local = jnp.arange(ts * ts, dtype=jnp.int32)
   local_x = (local % ts).astype(dtype) + 0.5
   local_y = (local // ts).astype(dtype) + 0.5
-  strict_lower_c = jnp.tril(jnp.ones((chunk, chunk), dtype), k=-1)
+  strict_upper_c = jnp.triu(jnp.ones((chunk, chunk), dtype), k=1)  # [d, c] = 1 if d < c
   strict_lower_g = jnp.tril(jnp.ones((steps_g, steps_g), bool), k=-1)
   log_t_min = math.log(settings.transmittance_min)
   cut = -0.5 * settings.radius_sigma ** 2
 
   def blend_step(carry, x: _ChunkInputs):
+    # Arrays are pixel-major, [G, P, C]: the prefix sum and the feature sum then contract
+    # the minor axis, which measured 2x faster on CPU than [G, C, P].
     prev_tile, prev_log_t = carry
     tile = x.tile  # [G]
     origin_x = ((tile % tiles_x) * ts).astype(dtype)
     origin_y = ((tile // tiles_x) * ts).astype(dtype)
-    dx = (origin_x[:, None] + local_x)[:, None, :] - x.means2d[..., 0][..., None]  # [G,C,P]
-    dy = (origin_y[:, None] + local_y)[:, None, :] - x.means2d[..., 1][..., None]
-    ca, cb, cc = (x.conics[..., k][..., None] for k in range(3))
+    dx = (origin_x[:, None] + local_x)[:, :, None] - x.means2d[:, None, :, 0]  # [G, P, C]
+    dy = (origin_y[:, None] + local_y)[:, :, None] - x.means2d[:, None, :, 1]
+    ca, cb, cc = (x.conics[:, None, :, k] for k in range(3))
     power = -0.5 * (ca * dx * dx + cc * dy * dy) - cb * dx * dy
-    alpha = jnp.minimum(settings.alpha_max, x.opacities[..., None] * jnp.exp(power))
-    keep = x.live[..., None] & (power >= cut) & (alpha >= settings.alpha_min)
+    alpha = jnp.minimum(settings.alpha_max, x.opacities[:, None, :] * jnp.exp(power))
+    keep = x.live[:, None, :] & (power >= cut) & (alpha >= settings.alpha_min)
     alpha = jnp.where(keep, alpha, 0.0)
-    log_keep = jnp.log1p(-alpha)  # [G, C, P], >= log(1 - alpha_max)
+    log_keep = jnp.log1p(-alpha)  # >= log(1 - alpha_max): finite
 
     # log T before each Gaussian = carry + earlier chunks of the tile + earlier in chunk.
-    within = jnp.einsum("cd,gdp->gcp", strict_lower_c, log_keep)
-    chunk_total = jnp.sum(log_keep, axis=1)  # [G, P]
+    within = log_keep @ strict_upper_c  # [G, P, C]
+    chunk_total = jnp.sum(log_keep, axis=-1)  # [G, P]
     same_tile = strict_lower_g & (tile[:, None] == tile[None, :])
     before_chunk = jnp.where(same_tile, 1.0, 0.0).astype(dtype) @ chunk_total
     before_chunk += jnp.where((tile == prev_tile)[:, None], prev_log_t[None, :], 0.0)
-    log_t = before_chunk[:, None, :] + within
+    log_t = before_chunk[:, :, None] + within
 
     include = log_t + log_keep >= log_t_min
     weight = jnp.where(include, alpha * jnp.exp(log_t), 0.0)
-    blended = jnp.einsum("gcp,gcf->gpf", weight, x.features)  # [G, P, F]
-    coverage = jnp.sum(weight, axis=1)  # [G, P]
+    blended = jnp.einsum("gpc,gcf->gpf", weight, x.features)  # [G, P, F]
+    coverage = jnp.sum(weight, axis=-1)  # [G, P]
     new_carry = (tile[-1], before_chunk[-1] + chunk_total[-1])
     return new_carry, (blended, coverage)
 
@@ -123,8 +126,11 @@ def composite(layout: TileLayout, means2d, conics, opacities, features, width, h
       return carry, (jnp.zeros((steps_g, p, features.shape[-1]), dtype),
                      jnp.zeros((steps_g, p), dtype))
 
-    return jax.lax.cond(step * steps_g < layout.num_chunks, blend_step, skip, carry, x)
+    return jax.lax.cond(step * steps_g < chunks_in_use, blend_step, skip, carry, x)
 
+  # Under vmap (M samples, many cameras) the skip test must stay a real branch, not a
+  # select that computes every step: it uses the largest chunk count in the batch.
+  chunks_in_use = _max_over_batch(layout.num_chunks)
   init = (jnp.int32(-1), jnp.zeros((ts * ts,), dtype))
   _, (blended, coverage) = jax.lax.scan(maybe_blend, init, (step_ids, xs))
 
@@ -138,6 +144,22 @@ def composite(layout: TileLayout, means2d, conics, opacities, features, width, h
   image = _tiles_to_image(blended[:num_tiles], tiles_x, tiles_y, ts, width, height)
   alpha = _tiles_to_image(coverage[:num_tiles, :, None], tiles_x, tiles_y, ts, width, height)
   return image, alpha[..., 0]
+
+
+@custom_vmap
+def _max_over_batch(n):
+  """Identity on one value; under `jax.vmap`, the maximum over the batch, unbatched.
+
+  This keeps `lax.cond` a true branch when `render` is vmapped: a batched predicate would
+  turn it into a select that evaluates (and wastes) every step of the loop.
+  """
+  return n
+
+
+@_max_over_batch.def_vmap
+def _max_over_batch_rule(axis_size, in_batched, n):
+  del axis_size, in_batched
+  return jnp.max(n), False
 
 
 def _tiles_to_image(tiles, tiles_x, tiles_y, ts, width, height):

@@ -1,5 +1,6 @@
 """`render`: chains projection -> colour -> tile intersection -> compositing."""
 
+import functools
 from typing import NamedTuple
 
 import chex
@@ -37,13 +38,15 @@ class RenderOutput(NamedTuple):
     return jnp.where(ok, self.depth / jnp.where(ok, self.alpha, 1.0), 0.0)
 
 
+@functools.partial(jax.jit, static_argnames=("settings",))
 def render(gaussians: Gaussians, camera: Camera, *, background=None,
            settings: RenderSettings = RenderSettings(), features=None) -> RenderOutput:
   """Renders Gaussians into one camera with the tile-based 3DGS rasteriser.
 
   Differentiable w.r.t. every array in `gaussians`, `camera` (pose and intrinsics),
-  `background` and `features`. Jit it with `settings` static (it is hashable); vmap it over
-  a batched `Camera` or a batched `Gaussians` (leading axis on every leaf).
+  `background` and `features`. It is jitted with `settings` static (hashable), so a call
+  outside `jax.jit` is compiled too and is inlined inside one; vmap it over a batched
+  `Camera` or a batched `Gaussians` (leading axis on every leaf).
 
   Args:
     gaussians: `Gaussians` with N >= 0 entries (unbatched).
@@ -97,6 +100,3 @@ def render(gaussians: Gaussians, camera: Camera, *, background=None,
   return RenderOutput(rgb=rgb, alpha=alpha, depth=blended[..., num_channels],
                       stats=layout.stats)
 
-
-# Jitted with the settings static; the entry point most callers want.
-render_jit = jax.jit(render, static_argnames=("settings",))

@@ -1,0 +1,87 @@
+"""Tile intersection: completeness, order, chunk layout, overflow."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from mfsample import RenderSettings
+from mfsample.render import projection, tiles
+from mfsample.render.tiles import tile_grid
+from mfsample.testing import orbit_camera, random_gaussians
+
+W, H = 70, 50
+project_gaussians = jax.jit(projection.project_gaussians, static_argnums=(6,))
+intersect_tiles = jax.jit(tiles.intersect_tiles, static_argnums=(1, 2, 3))
+
+
+def _layout(settings, num=150):
+  g = random_gaussians(num, seed=3, scale_range=(0.01, 0.2))
+  cam = orbit_camera(W, H, distance=2.5, fov_x=1.0)
+  proj = project_gaussians(g.means, g.scales, g.quats, g.opacities, None, cam, settings)
+  return proj, intersect_tiles(proj, W, H, settings)
+
+
+def _expected_pairs(proj, settings):
+  """Brute force: (tile, Gaussian) for every tile whose pixel centres meet the square."""
+  ts = settings.tile_size
+  tx, ty = tile_grid(W, H, ts)
+  pairs = set()
+  means2d, radii, valid = map(np.asarray, (proj.means2d, proj.radii, proj.valid))
+  for i in np.flatnonzero(valid):
+    r = radii[i] + 0.5
+    for t in range(tx * ty):
+      x0, y0 = (t % tx) * ts, (t // tx) * ts
+      cx = np.clip(means2d[i, 0], x0 + 0.5, x0 + ts - 0.5)  # nearest pixel centre in tile
+      cy = np.clip(means2d[i, 1], y0 + 0.5, y0 + ts - 0.5)
+      if abs(cx - means2d[i, 0]) <= r and abs(cy - means2d[i, 1]) <= r:
+        pairs.add((t, i))
+  return pairs
+
+
+def test_every_overlapping_tile_is_listed_once_in_depth_order():
+  settings = RenderSettings(max_intersections=4096, chunk_size=8, chunks_per_step=4)
+  proj, layout = _layout(settings)
+  assert not bool(layout.stats.overflow)
+  ids, live = np.asarray(layout.gaussian_ids), np.asarray(layout.live)
+  chunk_tile = np.asarray(layout.chunk_tile)
+  listed = [(int(chunk_tile[b]), int(ids[b, c])) for b, c in np.argwhere(live)]
+  assert len(listed) == len(set(listed)) == int(layout.stats.num_intersections)
+  # The listed set contains every tile the square truly touches (it may add a neighbour
+  # within the half-pixel rounding slack, which is harmless: pixels are cut exactly).
+  assert _expected_pairs(proj, settings) <= set(listed)
+  # Chunks belong to one tile each, tiles ascending, depth ascending within a tile.
+  depths = np.asarray(proj.depths)
+  num_chunks = int(layout.num_chunks)
+  assert np.all(np.diff(chunk_tile[:num_chunks]) >= 0)
+  assert np.all(chunk_tile[num_chunks:] == tile_grid(W, H, 16)[0] * tile_grid(W, H, 16)[1])
+  for t in np.unique(chunk_tile[:num_chunks]):
+    rows = chunk_tile == t
+    d = depths[ids[rows][live[rows]]]
+    assert np.all(np.diff(d) >= 0)
+    # Padding only at the end of a tile's last chunk.
+    flat = live[rows].ravel()
+    assert np.all(flat[: flat.sum()]) and not np.any(flat[flat.sum():])
+  assert int(layout.stats.num_padded) == num_chunks * settings.chunk_size
+  assert int(layout.stats.max_tile_load) == max(
+      np.sum(live[chunk_tile == t]) for t in np.unique(chunk_tile[:num_chunks]))
+
+
+def test_overflow_is_flagged_with_an_upper_bound_of_the_need():
+  big = RenderSettings(max_intersections=4096, chunk_size=8, chunks_per_step=4)
+  _, full = _layout(big)
+  for budget in (32, int(full.stats.num_padded) // 64 * 32):
+    _, cut = _layout(big.replace(max_intersections=budget))
+    assert bool(cut.stats.overflow)
+    assert int(cut.stats.num_intersections) == int(full.stats.num_intersections)
+    assert int(cut.stats.num_padded) >= int(full.stats.num_padded)
+
+
+def test_no_valid_gaussians_gives_an_empty_layout():
+  settings = RenderSettings(max_intersections=256, chunk_size=8, chunks_per_step=4)
+  g = random_gaussians(10, seed=0)
+  cam = orbit_camera(W, H)
+  proj = project_gaussians(g.means, g.scales, g.quats, g.opacities, jnp.zeros(10, bool), cam,
+                           settings)
+  layout = intersect_tiles(proj, W, H, settings)
+  assert int(layout.num_chunks) == 0 and not np.any(np.asarray(layout.live))
+  assert int(layout.stats.num_intersections) == 0 and not bool(layout.stats.overflow)
