@@ -306,3 +306,24 @@ def test_resumed_run_matches_an_uninterrupted_one(tiny_dataset, tmp_path):
   # Re-running a finished run only re-evaluates: nothing is trained twice.
   again = loop.train_and_evaluate(config, workdir)
   assert int(again.step) == 16
+
+
+def test_two_samples_per_step(tiny_dataset):
+  """M = 2: both samples are rendered (sequentially) and the data term is their mean."""
+  run = Run(tiny_config("lowrank", **{"sampler.num_samples": 2}), tiny_dataset)
+  assert run.setup.sobol.shape[1] == 2
+  state, metrics = run.step(run.state0)
+  assert not bool(metrics.overflow) and np.isfinite(float(metrics.loss))
+  # The two Sobol points of step 0 give two different images, hence two different losses;
+  # their mean is what the step reports.
+  model = run.state0.model
+  view = loop.view_for_step(run.setup.seed, 0, len(run.views))
+  camera, image = run.views.cameras[view], run.views.images[view]
+  cfg = run.setup.step_config
+  per_sample = [float(losses.photometric(
+      render(samplers.sample(model, jnp.asarray(z)), camera,
+             background=jnp.asarray(cfg.background), settings=cfg.settings).rgb, image))
+      for z in run.setup.sobol[:2]]
+  assert per_sample[0] != per_sample[1]
+  np.testing.assert_allclose(float(metrics.data_loss), np.mean(per_sample), rtol=1e-5)
+  chex.assert_tree_all_finite(state)
