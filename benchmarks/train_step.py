@@ -11,6 +11,7 @@ measures the jitted step (paper Tab. 4 measures the same thing per iteration).
   PYTHONPATH=. python benchmarks/train_step.py --rounds=2 --out=results/train_step.json
 """
 
+import dataclasses
 import json
 import os
 import resource
@@ -32,6 +33,11 @@ _POINTS = flags.DEFINE_integer("points", 10_000, "Gaussians of the initial cloud
 _SAMPLES = flags.DEFINE_integer("samples", 1, "M, samples per step.")
 _DATA = flags.DEFINE_string("data", "/work/shared/data/lego",
                             "NeRF Synthetic lego folder (synthetic scene if absent).")
+_FROM = flags.DEFINE_string(
+    "from_checkpoints", None,
+    "Checkpoint folder of a trained lego run (configs/train_lego.py, same --size): start "
+    "every variant from its mean Gaussians (with fresh B_hat) instead of the random initial "
+    "cloud, i.e. time late-training steps.")
 _OUT = flags.DEFINE_string("out", "results/train_step.json", "Output JSON.")
 _CHILD = flags.DEFINE_string("child", None, "Internal: run one variant and print JSON.")
 
@@ -59,11 +65,44 @@ def _config(variant):
   return config
 
 
+def _from_trained(config, setup, dataset, fresh):
+  """`fresh`'s sampler with the mean Gaussians of the newest checkpoint in --from_checkpoints."""
+  import jax
+  import jax.numpy as jnp
+  import numpy as np
+
+  from mfsample.model import Model, Params, init_spread
+  from mfsample.train import checkpoint as ckpt
+  from mfsample.train import loop
+  from mfsample.train.step import init_train_state
+
+  path = ckpt.list_checkpoints(_FROM.value)[-1]
+  meta = ckpt.read_meta(path)
+  with np.load(path) as data:
+    arrays = {k: data[k] for k in data.files if k != "__meta__"}
+  mean = {g: jnp.asarray(arrays[f".model.params.mean['{g}']"])
+          for g in fresh.model.params.mean}
+  mask = np.asarray(arrays[".model.mask"])
+  capacity, live = mask.shape[0], int(mask.sum())
+  shapes = {g: v.shape[1:] for g, v in mean.items()}
+  spread, signs = init_spread(np.random.default_rng(0), live, shapes, setup.spec,
+                              setup.init_scales)
+  pad = lambda x: jnp.asarray(np.concatenate([x, np.zeros((capacity - live,) + x.shape[1:],
+                                                         x.dtype)]))
+  model = Model(Params(mean, {g: pad(v) for g, v in spread.items()}),
+                {g: pad(v) for g, v in signs.items()}, jnp.asarray(mask),
+                jnp.asarray(int(arrays[".model.sh_degree"]), jnp.int32), setup.spec)
+  del config, dataset, loop, meta
+  return init_train_state(model, setup.step_config, jax.random.PRNGKey(0))._replace(
+      step=jnp.int32(0))
+
+
 def _child(variant):
   import jax
   import jax.numpy as jnp
   import numpy as np
 
+  from mfsample.render.budget import fit_budget
   from mfsample.train import data as data_lib
   from mfsample.train import loop
   from mfsample.train.step import make_train_step
@@ -79,14 +118,13 @@ def _child(variant):
   views = data_lib.to_device(dataset.train)
   setup = loop.make_setup(config, dataset.train)
   state = loop.init_state(config, setup, dataset.bounds)
+  if _FROM.value:
+    state = _from_trained(config, setup, dataset, state)
   m = setup.step_config.num_samples
   fn = make_train_step(setup.step_config)
   # Grow the budget until no step of the warm-up overflows (as the loop does).
   t0 = time.perf_counter()
   step, times = 0, []
-  import dataclasses
-
-  from mfsample.render.budget import fit_budget
   while step < _WARMUP.value + _STEPS.value:
     view = jnp.int32(loop.view_for_step(0, step, len(views)))
     rows = setup.sobol[step * m:(step + 1) * m]
@@ -133,6 +171,8 @@ def main(argv):
   passthrough = [f"--steps={_STEPS.value}", f"--warmup={_WARMUP.value}",
                  f"--size={_SIZE.value}", f"--points={_POINTS.value}",
                  f"--samples={_SAMPLES.value}", f"--data={_DATA.value}"]
+  if _FROM.value:
+    passthrough.append(f"--from_checkpoints={_FROM.value}")
   rounds = []
   for r in range(_ROUNDS.value):
     results = {}
@@ -168,6 +208,7 @@ def main(argv):
   first = rounds[0][_VARIANTS.value[0]]
   with open(_OUT.value, "w") as f:
     json.dump({"table": table, "rounds": rounds, "resolution": first["resolution"],
+               "from_checkpoints": _FROM.value, "live_gaussians": first["live"],
                "points": _POINTS.value, "samples": _SAMPLES.value, "steps": _STEPS.value,
                "cpu_count": os.cpu_count(), "load_end": _load()}, f, indent=2)
   print(f"saved {_OUT.value}")

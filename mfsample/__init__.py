@@ -6,23 +6,39 @@ The public API on one screen:
   render, RenderSettings            the tile-based 3DGS renderer and its static settings
   RenderOutput, TileStats           what render returns
   fit_budget, render_with_budget    grow the intersection budget instead of truncating
+  Model, SamplerSpec                a stochastic 3DGS model: raw mean, B_hat, mask (Sec. 4.2)
+  sample, mean_gaussians            theta(z) = mean + B_hat z as Gaussians; the mean model
+  sobol_z, draw_z                   z for the samplers: scrambled Sobol / uniform in [-1, 1]
+  train_and_evaluate                the training experiment (`mfsample.train.train` for Views)
   testing                           synthetic scenes for tests, benchmarks and notebooks
 """
 
 from mfsample import testing
 from mfsample.camera import Camera
 from mfsample.gaussians import Gaussians
+from mfsample.model import Model, SamplerSpec, mean_gaussians
 from mfsample.render import RenderOutput, RenderSettings, TileStats, render
 from mfsample.render.budget import fit_budget, render_with_budget
+from mfsample.samplers import draw_z, sample, sobol_z
+
+# `mfsample.train` stays the subpackage (its `train` function is `mfsample.train.train`).
+from mfsample.train import train_and_evaluate
 
 __all__ = [
     "Camera",
     "Gaussians",
+    "Model",
     "RenderOutput",
     "RenderSettings",
+    "SamplerSpec",
     "TileStats",
+    "draw_z",
     "fit_budget",
+    "mean_gaussians",
     "render",
     "render_with_budget",
+    "sample",
+    "sobol_z",
     "testing",
+    "train_and_evaluate",
 ]

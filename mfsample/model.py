@@ -225,11 +225,22 @@ def project_spread(spread, spec):
 # ------------------------------------------------------------------------- construction
 
 
-def init_spread(key, num, shapes, spec, init_scales, dtype=jnp.float32):
+def host_rng(key):
+  """A numpy Generator seeded by a JAX PRNG key.
+
+  Construction and densification run on the host with numpy: they have a new shape at
+  every call, and eager JAX random ops would compile for each of them.
+  """
+  data = np.asarray(jax.random.key_data(key) if jnp.issubdtype(key.dtype, jax.dtypes.prng_key)
+                    else key, np.uint32)
+  return np.random.default_rng(data.ravel().tolist())
+
+
+def init_spread(rng, num, shapes, spec, init_scales, dtype=np.float32):
   """Fresh B_hat entries for `num` Gaussians: raw ~ scale * U[0, 1], random signs.
 
   Args:
-    key: PRNG key.
+    rng: `np.random.Generator` (see `host_rng`).
     num: number of rows.
     shapes: {group: per-Gaussian shape} of the model (stochastic groups it lacks are skipped).
     spec: `SamplerSpec`.
@@ -237,41 +248,34 @@ def init_spread(key, num, shapes, spec, init_scales, dtype=jnp.float32):
       extent for centres and log-scales).
 
   Returns:
-    (spread {group: [num, ..., k]}, signs {group: int8 same shape}); empty for the
-    deterministic sampler.
+    (spread {group: [num, ..., k]}, signs {group: int8 same shape}) as numpy arrays; empty
+    for the deterministic sampler.
   """
   spread, signs = {}, {}
   if not spec.stochastic:
     return spread, signs
-  for i, g in enumerate(sorted(set(spec.groups) & set(shapes), key=GROUPS.index)):
+  for g in sorted(set(spec.groups) & set(shapes), key=GROUPS.index):
     shape = (num,) + tuple(shapes[g]) + spec.columns
-    k_raw, k_sign = jax.random.split(jax.random.fold_in(key, i))
-    spread[g] = init_scales[g] * jax.random.uniform(k_raw, shape, dtype)
-    signs[g] = jnp.where(jax.random.bernoulli(k_sign, 0.5, shape), 1, -1).astype(jnp.int8)
+    spread[g] = (init_scales[g] * rng.random(shape)).astype(dtype)
+    signs[g] = np.where(rng.random(shape) < 0.5, 1, -1).astype(np.int8)
   return spread, signs
 
 
-def pad_rows(tree, capacity):
-  """Pads every [n, ...] leaf of `tree` with zero rows to [capacity, ...]."""
-  def pad(x):
-    extra = capacity - x.shape[0]
-    if extra < 0:
-      raise ValueError(f"cannot pad {x.shape[0]} rows to capacity {capacity}")
-    return jnp.concatenate([x, jnp.zeros((extra,) + x.shape[1:], x.dtype)], axis=0)
-  return jax.tree.map(pad, tree)
-
-
-def padding_values(shapes, num, dtype=jnp.float32):
-  """Neutral raw values for `num` padding rows (identity rotation, ~zero opacity)."""
-  out = {g: jnp.zeros((num,) + tuple(s), dtype) for g, s in shapes.items()}
-  out["quats"] = out["quats"].at[:, 0].set(1.0)
-  out["opacity_logits"] = jnp.full((num,), _PAD_OPACITY_LOGIT, dtype)
+def padding_values(shapes, num, dtype=np.float32):
+  """Neutral raw values for `num` padding rows (identity rotation, ~zero opacity), numpy."""
+  out = {g: np.zeros((num,) + tuple(s), dtype) for g, s in shapes.items()}
+  out["quats"][:, 0] = 1.0
+  out["opacity_logits"][:] = _PAD_OPACITY_LOGIT
   return out
 
 
+def _pad(x, capacity, fill):
+  return np.concatenate([x, fill[: capacity - x.shape[0]].astype(x.dtype)], axis=0)
+
+
 def init_model(key, points, *, spec, sh_degree, init_scales, capacity=None,
-               init_opacity=0.1, colors=None, dtype=jnp.float32):
-  """A model whose mean Gaussians sit at `points` (3DGS initialisation).
+               init_opacity=0.1, colors=None):
+  """A model whose mean Gaussians sit at `points` (3DGS initialisation), float32.
 
   Scales follow 3DGS: the root mean squared distance to the 3 nearest neighbours (isotropic),
   identity rotations, opacity `init_opacity`; colours near grey unless `colors` is given
@@ -298,28 +302,30 @@ def init_model(key, points, *, spec, sh_degree, init_scales, capacity=None,
   if capacity < n:
     raise ValueError(f"capacity {capacity} < number of points {n}")
   shapes = group_shapes(sh_degree)
-  k_color, k_spread = jax.random.split(key)
-  from mfsample.render.sh import rgb_to_sh_dc  # local: keeps model importable standalone
+  rng = host_rng(key)
   if colors is None:
-    sh_dc = jax.random.uniform(k_color, (n, 3), dtype) / 255.0
+    sh_dc = rng.random((n, 3)) / 255.0
   else:
-    sh_dc = rgb_to_sh_dc(jnp.asarray(colors, dtype))
+    sh_dc = (np.asarray(colors, np.float64) - 0.5) / 0.28209479177387814  # rgb_to_sh_dc
+  quats = np.zeros((n, 4))
+  quats[:, 0] = 1.0
   mean = {
-      "means": jnp.asarray(points, dtype),
-      "log_scales": jnp.asarray(np.repeat(np.log(knn_scale(points))[:, None], 3, 1), dtype),
-      "quats": jnp.tile(jnp.array([1.0, 0.0, 0.0, 0.0], dtype), (n, 1)),
-      "opacity_logits": jnp.full((n,), float(np.log(init_opacity / (1 - init_opacity))),
-                                 dtype),
+      "means": points,
+      "log_scales": np.repeat(np.log(knn_scale(points))[:, None], 3, 1),
+      "quats": quats,
+      "opacity_logits": np.full((n,), np.log(init_opacity / (1 - init_opacity))),
       "sh_dc": sh_dc,
   }
   if "sh_rest" in shapes:
-    mean["sh_rest"] = jnp.zeros((n,) + shapes["sh_rest"], dtype)
-  pad = padding_values(shapes, capacity - n, dtype)
-  mean = {g: jnp.concatenate([mean[g], pad[g]], axis=0) for g in mean}
-  spread, signs = init_spread(k_spread, n, shapes, spec, init_scales, dtype)
-  spread, signs = pad_rows(spread, capacity), pad_rows(signs, capacity)
-  mask = jnp.arange(capacity) < n
-  return Model(Params(mean, spread), signs, mask, jnp.int32(0), spec)
+    mean["sh_rest"] = np.zeros((n,) + shapes["sh_rest"])
+  pad = padding_values(shapes, capacity - n)
+  mean = {g: jnp.asarray(_pad(v.astype(np.float32), capacity, pad[g])) for g, v in mean.items()}
+  spread, signs = init_spread(rng, n, shapes, spec, init_scales)
+  zeros = lambda x: np.zeros((capacity,) + x.shape[1:], x.dtype)
+  spread = {g: jnp.asarray(_pad(v, capacity, zeros(v))) for g, v in spread.items()}
+  signs = {g: jnp.asarray(_pad(v, capacity, zeros(v))) for g, v in signs.items()}
+  mask = jnp.asarray(np.arange(capacity) < n)
+  return Model(Params(mean, spread), signs, mask, jnp.asarray(0, jnp.int32), spec)
 
 
 def knn_scale(points, k=3):

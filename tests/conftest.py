@@ -1,13 +1,9 @@
-"""Test-session setup, and shared fixtures: a tiny synthetic scene rendered once per session.
+"""Test-session setup.
 
 The suite is dominated by XLA compilation of many small, distinct programs, not by running
 them. LLVM's backend optimisation level 0 cuts that CPU time by about a third (measured on
 tests/test_render.py) without changing results: floating-point semantics are set by XLA's
 own flags, not by the LLVM pass pipeline. A user-provided XLA_FLAGS is respected.
-
-Compiled functions are shared through the library's module-level jits (`render`,
-`train_step_jit`, which take their settings as static arguments): tests that build equal
-configs reuse one compilation.
 """
 
 import os
@@ -16,7 +12,13 @@ if "xla_backend_optimization_level" not in os.environ.get("XLA_FLAGS", ""):
   os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "")
                              + " --xla_backend_optimization_level=0").strip()
 
-import pytest  # noqa: E402  (after XLA_FLAGS: jax reads them when first imported)
+
+# ------------------------------------------------------------------------- training fixtures
+# A tiny synthetic scene rendered once per session. Compiled functions are shared through the
+# library's module-level jits (`render`, `train_step_jit`, which take their settings as
+# static arguments): tests that build equal configs reuse one compilation.
+
+import pytest  # noqa: E402
 
 from configs import train_synthetic  # noqa: E402
 from mfsample.train import data as data_lib  # noqa: E402

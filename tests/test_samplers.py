@@ -31,7 +31,7 @@ def test_z_shape_and_sample_under_vmap(kind):
   m = 4
   z = samplers.draw_z(model, m, jax.random.PRNGKey(1))
   assert z.shape == (m,) + samplers.z_shape(model)
-  batch = jax.vmap(lambda zi: samplers.sample(model, zi))(z)
+  batch = jax.jit(jax.vmap(samplers.sample, in_axes=(None, 0)))(model, z)
   assert batch.means.shape == (m, model.capacity, 3)
   assert batch.sh.shape == (m, model.capacity, 4, 3)
   np.testing.assert_array_equal(batch.mask[0], model.mask)
@@ -57,7 +57,7 @@ def test_deterministic_sample_is_the_mean():
 def test_zero_z_gives_the_mean(kind):
   model = _model(kind)
   z = jnp.zeros(samplers.z_shape(model))
-  chex.assert_trees_all_close(samplers.perturb(model, z), model.params.mean)
+  chex.assert_trees_all_close(jax.jit(samplers.perturb)(model, z), model.params.mean)
 
 
 @pytest.mark.parametrize("kind", ("diagonal", "block", "lowrank"))
@@ -89,7 +89,7 @@ def test_sample_statistics_match_closed_form(kind):
 def test_lowrank_samples_lie_on_a_k_dimensional_manifold():
   model = _model("lowrank", rank=2, scale=0.3)
   z = samplers.draw_z(model, 50, jax.random.PRNGKey(0))
-  thetas = jax.vmap(lambda zi: _flat(samplers.perturb(model, zi)))(z)
+  thetas = jax.jit(jax.vmap(lambda zi: _flat(samplers.perturb(model, zi))))(z)
   s = np.linalg.svd(np.asarray(thetas - _flat(model.params.mean)), compute_uv=False)
   assert s[1] > 1e-3 * s[0] and s[2] < 1e-5 * s[0]  # rank exactly 2
 
@@ -97,7 +97,7 @@ def test_lowrank_samples_lie_on_a_k_dimensional_manifold():
 def test_block_samples_are_independent_across_gaussians():
   model = _model("block", rank=2, n=2, scale=0.3, capacity=2, groups=("means",))
   z = samplers.draw_z(model, 20_000, jax.random.PRNGKey(4))
-  x = np.asarray(jax.vmap(lambda zi: samplers.perturb(model, zi)["means"])(z))
+  x = np.asarray(jax.jit(jax.vmap(lambda zi: samplers.perturb(model, zi)["means"]))(z))
   corr = np.corrcoef(x[:, 0, 0], x[:, 1, 0])[0, 1]
   within = np.corrcoef(x[:, 0, 0], x[:, 0, 1])[0, 1]
   assert abs(corr) < 0.05 and abs(within) > 0.05

@@ -38,7 +38,7 @@ class Run:
   def step(self, state):
     i = int(state.step)
     m = self.setup.step_config.num_samples
-    view = jnp.int32(loop.view_for_step(self.config.seed, i, len(self.views)))
+    view = jnp.int32(loop.view_for_step(self.setup.seed, i, len(self.views)))
     return self.fn(state, self.views.images, self.views.cameras, view,
                    self.setup.sobol[i * m:(i + 1) * m])
 
@@ -169,7 +169,7 @@ def test_densification_keeps_parameters_and_optimizer_state_aligned(runs):
       grad_accum=jnp.asarray(grads), count=jnp.asarray((grads > 0).astype(np.int32))))
   extent = run.setup.extent
   new, report = densify_lib.densify_and_prune(
-      state, key=jax.random.PRNGKey(1), rng=np.random.default_rng(1), grad_threshold=0.5,
+      state, rng=np.random.default_rng(1), grad_threshold=0.5,
       percent_dense=0.05, extent=extent, min_opacity=0.005,
       init_scales=run.setup.init_scales, max_gaussians=10_000)
   assert report.cloned + report.split > 0 and report.pruned > 0
@@ -207,7 +207,7 @@ def test_densification_respects_max_gaussians(runs):
       grad_accum=jnp.ones(state.model.capacity), count=jnp.ones(state.model.capacity,
                                                                 jnp.int32)))
   new, report = densify_lib.densify_and_prune(
-      state, key=jax.random.PRNGKey(0), rng=np.random.default_rng(0), grad_threshold=0.5,
+      state, rng=np.random.default_rng(0), grad_threshold=0.5,
       percent_dense=0.01, extent=run.setup.extent, min_opacity=0.0,
       init_scales=run.setup.init_scales, max_gaussians=n + 10)
   assert report.live <= n + 10 and report.split + report.cloned > 0
@@ -252,7 +252,8 @@ def test_step_finite_at_the_extremes(tiny_dataset, kind, rank):
   state = run.state0
   model = state.model
   spread = {g: jnp.where(model.mask.reshape((-1,) + (1,) * (v.ndim - 1)),
-                         run.setup.spec.bound(g), 0.0) for g, v in model.params.spread.items()}
+                         jnp.full_like(v, run.setup.spec.bound(g)), 0.0)
+            for g, v in model.params.spread.items()}
   state = state._replace(model=model.replace(params=model.params._replace(spread=spread)))
   for _ in range(2):
     state, metrics = run.step(state)
@@ -305,3 +306,24 @@ def test_resumed_run_matches_an_uninterrupted_one(tiny_dataset, tmp_path):
   # Re-running a finished run only re-evaluates: nothing is trained twice.
   again = loop.train_and_evaluate(config, workdir)
   assert int(again.step) == 16
+
+
+def test_two_samples_per_step(tiny_dataset):
+  """M = 2: both samples are rendered (sequentially) and the data term is their mean."""
+  run = Run(tiny_config("lowrank", **{"sampler.num_samples": 2}), tiny_dataset)
+  assert run.setup.sobol.shape[1] == 2
+  state, metrics = run.step(run.state0)
+  assert not bool(metrics.overflow) and np.isfinite(float(metrics.loss))
+  # The two Sobol points of step 0 give two different images, hence two different losses;
+  # their mean is what the step reports.
+  model = run.state0.model
+  view = loop.view_for_step(run.setup.seed, 0, len(run.views))
+  camera, image = run.views.cameras[view], run.views.images[view]
+  cfg = run.setup.step_config
+  per_sample = [float(losses.photometric(
+      render(samplers.sample(model, jnp.asarray(z)), camera,
+             background=jnp.asarray(cfg.background), settings=cfg.settings).rgb, image))
+      for z in run.setup.sobol[:2]]
+  assert per_sample[0] != per_sample[1]
+  np.testing.assert_allclose(float(metrics.data_loss), np.mean(per_sample), rtol=1e-5)
+  chex.assert_tree_all_finite(state)

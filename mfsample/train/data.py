@@ -8,7 +8,6 @@
   candidate and test cameras.
 """
 
-import json
 import os
 from pathlib import Path
 from typing import NamedTuple
@@ -18,12 +17,12 @@ import jax.numpy as jnp
 import numpy as np
 
 from mfsample.camera import Camera
+from mfsample.data import load_blender
 from mfsample.data.views import Views
-from mfsample.gaussians import Gaussians
 from mfsample.render import render
 from mfsample.render.budget import render_with_budget
 from mfsample.render.settings import RenderSettings
-from mfsample.render.sh import rgb_to_sh_dc
+from mfsample.testing import random_gaussians
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 
@@ -35,7 +34,8 @@ class Dataset(NamedTuple):
     train: `Views` to train on.
     test: `Views` to evaluate on.
     background: RGB tuple the images are composited on.
-    bounds: (low [3], high [3]) box for the random initial point cloud.
+    bounds: (low [3], high [3]) box for the random initial point cloud
+      (`config.init_bounds`; for a Mitsuba scene the cube around its bounding sphere).
   """
 
   train: Views
@@ -60,7 +60,7 @@ def load_dataset(cfg) -> Dataset:
   elif cfg.kind == "blender":
     train, test = _blender_views(cfg, background)
   elif cfg.kind == "scene":
-    train, test = _scene_views(cfg)
+    train, test, bounds = _scene_views(cfg, background)
   else:
     raise ValueError(f"config.data.kind must be 'synthetic', 'blender' or 'scene', "
                      f"got {cfg.kind!r}")
@@ -72,19 +72,8 @@ def load_dataset(cfg) -> Dataset:
 
 def synthetic_gaussians(num, seed, sh_degree=0, radius=0.6):
   """`num` random, fairly opaque Gaussians in the cube [-radius, radius]^3."""
-  rng = np.random.default_rng(seed)
-  k = (sh_degree + 1) ** 2
-  sh = np.zeros((num, k, 3), np.float32)
-  sh[:, 0] = np.asarray(rgb_to_sh_dc(rng.uniform(0.05, 0.95, (num, 3))))
-  if k > 1:
-    sh[:, 1:] = rng.normal(0.0, 0.1, (num, k - 1, 3))
-  return Gaussians(
-      means=jnp.asarray(rng.uniform(-radius, radius, (num, 3)), jnp.float32),
-      scales=jnp.asarray(rng.uniform(0.04, 0.12, (num, 3)) * radius, jnp.float32),
-      quats=jnp.asarray(rng.normal(size=(num, 4)), jnp.float32),
-      opacities=jnp.asarray(rng.uniform(0.6, 0.95, num), jnp.float32),
-      sh=jnp.asarray(sh),
-  )
+  return random_gaussians(num, sh_degree=sh_degree, seed=seed, extent=radius,
+                          scale_range=(0.04, 0.12), opacity_range=(0.6, 0.95))
 
 
 def orbit_cameras(num, width, height, distance=3.0, fov_x=0.8, seed=0, offset=0.0):
@@ -134,10 +123,6 @@ def _blender_views(cfg, background):
     raise FileNotFoundError(
         f"No NeRF Synthetic scene at {path} (config.data.path={cfg.path!r}, relative paths "
         f"are resolved against {REPO_ROOT}). Expected transforms_train.json there.")
-  try:
-    from mfsample.data import load_blender
-  except ImportError:  # the loader lands with the data issue; until then a minimal one
-    load_blender = _load_blender_minimal
   train = load_blender(str(path), "train", downscale=cfg.downscale, background=background)
   test = load_blender(str(path), "test", downscale=cfg.downscale, background=background)
   if cfg.test_every > 1:
@@ -145,49 +130,27 @@ def _blender_views(cfg, background):
   return train, test
 
 
-def _load_blender_minimal(path, split, *, downscale=1, background=(1.0, 1.0, 1.0)):
-  """Stand-in for `mfsample.data.load_blender` (same signature) until it is merged.
-
-  Composites RGBA on `background`, then box-downscales by an integer factor (compositing
-  is linear in premultiplied colour, so the order does not matter).
-  """
-  import imageio.v3 as iio
-
-  with open(os.path.join(path, f"transforms_{split}.json")) as f:
-    meta = json.load(f)
-  images, poses, names = [], [], []
-  bg = np.asarray(background, np.float32)
-  for frame in meta["frames"]:
-    rgba = iio.imread(os.path.join(path, frame["file_path"] + ".png")).astype(np.float32) / 255
-    rgb = rgba[..., :3] * rgba[..., 3:] + bg * (1.0 - rgba[..., 3:])
-    if downscale > 1:
-      h, w = rgb.shape[0] // downscale, rgb.shape[1] // downscale
-      rgb = rgb[:h * downscale, :w * downscale].reshape(h, downscale, w, downscale, 3)
-      rgb = rgb.mean(axis=(1, 3))
-    images.append(rgb)
-    poses.append(np.asarray(frame["transform_matrix"], np.float32))
-    names.append(os.path.basename(frame["file_path"]))
-  h, w = images[0].shape[:2]
-  cams = Camera.from_blender(np.stack(poses), meta["camera_angle_x"], w, h)
-  return Views(jnp.asarray(np.stack(images)), cams, None, None, tuple(names))
-
-
 # ------------------------------------------------------------------------- scene
 
 
-def _scene_views(cfg):
+def _scene_views(cfg, background):
   try:
     from mfsample import scenes
   except ImportError as err:
-    raise ImportError("config.data.kind='scene' needs mfsample.scenes and the optional "
-                      "Mitsuba extra (pip install 'mfsample[scenes]')") from err
+    raise ImportError("config.data.kind='scene' needs mfsample.scenes and, for new captures, "
+                      "the optional Mitsuba extra (pip install 'mfsample[scenes]')") from err
   scene = scenes.get_scene(cfg.scene)
   train_cams = scene.candidate_cameras(cfg.width, cfg.height, num=cfg.num_train)
   test_cams = scene.test_cameras(cfg.width, cfg.height, num=cfg.num_test)
+  spp = scenes.DEFAULT_SPP if cfg.spp is None else cfg.spp
   cache = str(resolve_path(cfg.cache_dir)) if cfg.cache_dir else None
-  train = scenes.capture_views(scene, train_cams, spp=cfg.spp, cache_dir=cache)
-  test = scenes.capture_views(scene, test_cams, spp=cfg.spp, cache_dir=cache)
-  return train, test
+  kwargs = dict(spp=spp, cache_dir=cache, background=background)
+  train = scenes.capture_views(scene, train_cams, **kwargs)
+  test = scenes.capture_views(scene, test_cams, **kwargs)
+  # The random initial cloud fills the cube around the scene's bounding sphere.
+  center = np.asarray(scene.center, np.float32)
+  bounds = (center - scene.radius, center + scene.radius)
+  return train, test, bounds
 
 
 def scene_extent(cameras: Camera):
@@ -205,6 +168,5 @@ def scene_extent(cameras: Camera):
 
 def to_device(views: Views):
   """`Views` with jnp arrays (the step indexes them inside jit)."""
-  # Views defines __len__ (number of views), which breaks NamedTuple._replace: rebuild.
-  return Views(jnp.asarray(views.images, jnp.float32), jax.tree.map(jnp.asarray, views.cameras),
-               views.alphas, views.depths, views.names)
+  return views.replace(images=jnp.asarray(views.images, jnp.float32),
+                       cameras=jax.tree.map(jnp.asarray, views.cameras))

@@ -19,7 +19,6 @@ import jax.numpy as jnp
 import numpy as np
 
 from mfsample.model import Model, Params, capacity_bucket, group_shapes, init_spread, padding_values
-from mfsample.render.projection import quat_to_rotmat
 from mfsample.train.optim import map_moments
 from mfsample.train.step import DensifyStats, TrainState
 
@@ -46,15 +45,15 @@ def _assemble(old, keep, new_rows, capacity, pad_rows):
   return np.concatenate([body, pad.astype(body.dtype)], axis=0)
 
 
-def densify_and_prune(state: TrainState, *, key, rng, grad_threshold, percent_dense, extent,
+def densify_and_prune(state: TrainState, *, rng, grad_threshold, percent_dense, extent,
                       min_opacity, init_scales, max_gaussians, prune_big=False,
                       max_screen_size=0.0, max_world_size=0.1, split_count=2):
   """One 3DGS densification + pruning round.
 
   Args:
     state: `TrainState` (its `stats` hold the gradients since the last round).
-    key: PRNG key for the new Gaussians' B_hat entries and signs.
-    rng: `np.random.Generator` for the split positions.
+    rng: `np.random.Generator` for the split positions and the new B_hat entries / signs
+      (host-side: shapes change at every call, eager JAX ops would compile each time).
     grad_threshold: average NDC gradient norm above which a Gaussian is densified (2e-4).
     percent_dense: Gaussians with max scale <= percent_dense * extent are cloned, larger
       ones split (0.01).
@@ -115,8 +114,7 @@ def densify_and_prune(state: TrainState, *, key, rng, grad_threshold, percent_de
   if len(split_idx):
     n_children = len(split_idx) * split_count
     scales = np.exp(mean["log_scales"][split_idx]).repeat(split_count, axis=0)
-    rot = np.asarray(quat_to_rotmat(jnp.asarray(mean["quats"][split_idx])))
-    rot = rot.repeat(split_count, axis=0)
+    rot = _rotmat(mean["quats"][split_idx]).repeat(split_count, axis=0)
     local = rng.normal(size=(n_children, 3)) * scales
     sl = slice(len(clone_idx), None)
     new_mean["means"][sl] = (mean["means"][split_idx].repeat(split_count, axis=0)
@@ -127,11 +125,10 @@ def densify_and_prune(state: TrainState, *, key, rng, grad_threshold, percent_de
   live = len(keep) + num_new
   new_capacity = max(capacity, capacity_bucket(live))
   shapes = group_shapes(model.max_sh_degree)
-  pad_mean = _host(padding_values(shapes, new_capacity))
+  pad_mean = padding_values(shapes, new_capacity)
   mean_out = {g: _assemble(mean[g], keep, new_mean[g], new_capacity, pad_mean[g])
               for g in mean}
-  fresh_spread, fresh_signs = init_spread(key, num_new, shapes, model.spec, init_scales)
-  fresh_spread, fresh_signs = _host(fresh_spread), _host(fresh_signs)
+  fresh_spread, fresh_signs = init_spread(rng, num_new, shapes, model.spec, init_scales)
 
   def zeros_like_rows(x):
     return np.zeros((new_capacity,) + x.shape[1:], x.dtype)
@@ -152,7 +149,7 @@ def densify_and_prune(state: TrainState, *, key, rng, grad_threshold, percent_de
       params=Params(mean=jax.tree.map(jnp.asarray, mean_out),
                     spread=jax.tree.map(jnp.asarray, spread_out)),
       signs=jax.tree.map(jnp.asarray, signs_out),
-      mask=jnp.arange(new_capacity) < live,
+      mask=jnp.asarray(np.arange(new_capacity) < live),
       sh_degree=model.sh_degree,
       spec=model.spec,
   )
@@ -162,6 +159,19 @@ def densify_and_prune(state: TrainState, *, key, rng, grad_threshold, percent_de
   report = DensifyReport(cloned=len(clone_idx), split=len(split_idx),
                          pruned=int(prune.sum()), live=live, capacity=new_capacity)
   return new_state, report
+
+
+def _rotmat(quats):
+  """[N, 4] (w, x, y, z), any norm -> [N, 3, 3] rotation matrices (numpy; zero -> identity)."""
+  q = np.asarray(quats, np.float64)
+  norm = np.linalg.norm(q, axis=-1, keepdims=True)
+  q = np.where(norm > 1e-12, q / np.maximum(norm, 1e-12), np.array([1.0, 0.0, 0.0, 0.0]))
+  w, x, y, z = q.T
+  return np.stack([
+      np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+      np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+      np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
+  ], axis=-2)
 
 
 def reset_opacity(state: TrainState, max_opacity=0.01):

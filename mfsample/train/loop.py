@@ -30,6 +30,7 @@ from mfsample.train.step import StepConfig, TrainState, init_train_state, make_t
 class TrainSetup(NamedTuple):
   """Host-side constants of a run, derived from the config and the training views."""
 
+  seed: int  # seeds the initial cloud, B_hat signs, step keys, view order, densification
   extent: float  # scene extent (world units)
   spec: SamplerSpec
   init_scales: dict  # {group: float} scale of fresh B_hat entries
@@ -59,8 +60,18 @@ def sampler_spec(config, extent, sh_degree):
                      bounds=bounds)
 
 
-def make_setup(config, train_views, *, extent=None):
-  """`TrainSetup` for training on `train_views` with `config`."""
+def make_setup(config, train_views, *, extent=None, key=None):
+  """`TrainSetup` for training on `train_views` with `config`.
+
+  Args:
+    config: training config.
+    train_views: `Views` (their cameras give the scene extent).
+    extent: overrides `config.data.extent` and the cameras' extent.
+    key: optional PRNG key; replaces `config.seed` as the source of all randomness
+      (the Sobol scrambling keeps `config.sampler.z_seed`).
+  """
+  seed = int(config.seed) if key is None else int(
+      jax.random.randint(key, (), 0, np.iinfo(np.int32).max))
   if extent is None:
     extent = (config.data.extent if config.data.get("extent") is not None
               else data_lib.scene_extent(train_views.cameras))
@@ -97,17 +108,17 @@ def make_setup(config, train_views, *, extent=None):
     raise ValueError(f"config.sampler.z must be 'sobol' or 'uniform', got {config.sampler.z!r}")
   else:
     sobol = np.zeros((num_steps * m, 0), np.float32)
-  return TrainSetup(extent=float(extent), spec=spec, init_scales=init_scales,
+  return TrainSetup(seed=seed, extent=float(extent), spec=spec, init_scales=init_scales,
                     step_config=step_config,
                     num_steps=num_steps, sobol=sobol)
 
 
 def init_state(config, setup: TrainSetup, bounds):
   """The step-0 `TrainState`: random points in the box `bounds` = (low [3], high [3])."""
-  rng = np.random.default_rng([int(config.seed), 0])
+  rng = np.random.default_rng([setup.seed, 0])
   low, high = (np.asarray(b, np.float64) for b in bounds)
   points = rng.uniform(low, high, (int(config.model.init_points), 3))
-  key = jax.random.PRNGKey(int(config.seed))
+  key = jax.random.PRNGKey(setup.seed)
   k_model, k_train = jax.random.split(key)
   model = init_model(k_model, points, spec=setup.spec, sh_degree=int(config.model.sh_degree),
                      init_scales=setup.init_scales, init_opacity=config.model.init_opacity)
@@ -126,7 +137,7 @@ def view_for_step(seed, step, num_views):
 def _meta(config, setup, state):
   return {"step": int(state.step), "capacity": int(state.model.capacity),
           "max_intersections": int(setup.step_config.settings.max_intersections),
-          "seed": int(config.seed), "sobol_seed": int(config.sampler.z_seed),
+          "seed": setup.seed, "sobol_seed": int(config.sampler.z_seed),
           "sobol_position": int(state.step) * setup.step_config.num_samples,
           "extent": setup.extent}
 
@@ -137,6 +148,9 @@ def restore_latest(config, setup, bounds, directory):
   if not paths:
     return None
   meta = ckpt.read_meta(paths[-1])
+  if meta.get("seed") != setup.seed:
+    raise ValueError(f"{paths[-1]} was written by a run with seed {meta.get('seed')}, this run "
+                     f"has seed {setup.seed}: use another checkpoint directory")
   template = init_state(config, setup, bounds)
   template = densify_lib.grow_capacity(template, meta["capacity"])
   state, meta = ckpt.restore_checkpoint(paths[-1], template)
@@ -150,9 +164,8 @@ def _host_events(config, setup, state, step):
   d = config.densify
   report = None
   if d.start < step < d.stop and step % d.every == 0:
-    key = jax.random.fold_in(jax.random.PRNGKey(int(config.seed) + 1), step)
     state, report = densify_lib.densify_and_prune(
-        state, key=key, rng=np.random.default_rng([int(config.seed), 2, step]),
+        state, rng=np.random.default_rng([setup.seed, 2, step]),
         grad_threshold=d.grad_threshold, percent_dense=d.percent_dense, extent=setup.extent,
         min_opacity=d.min_opacity, init_scales=setup.init_scales,
         max_gaussians=config.model.max_gaussians, prune_big=step > d.prune_big_after,
@@ -163,14 +176,20 @@ def _host_events(config, setup, state, step):
   return state, report
 
 
-def train(config, views, *, setup=None, state=None, bounds=None, checkpoint_dir=None,
-          stop_at=None, max_traces=None):
+def train(config, views, key=None, *, setup=None, state=None, bounds=None,
+          checkpoint_dir=None, stop_at=None, max_traces=None):
   """Trains a stochastic Gaussian field on `views` (reusable: planning calls this).
 
+  Everything random is a function of the seed (`key` if given, else `config.seed`) and
+  the step, so equal inputs give bit-identical results, and a resumed run continues
+  exactly where a killed one stopped.
+
   Args:
-    config: a training config (`configs/train_default.py`).
+    config: a training config (`configs/train_default.py`); `config.train.num_steps`
+      sets the length.
     views: training `Views`.
-    setup: optional `TrainSetup` (default: `make_setup(config, views)`).
+    key: optional PRNG key replacing `config.seed`.
+    setup: optional `TrainSetup` (default: `make_setup(config, views, key=key)`).
     state: optional starting `TrainState` (default: a fresh one, or the newest checkpoint
       in `checkpoint_dir`).
     bounds: (low [3], high [3]) of the initial point cloud (default: `config.data.init_bounds`).
@@ -184,7 +203,7 @@ def train(config, views, *, setup=None, state=None, bounds=None, checkpoint_dir=
   """
   from tqdm.auto import tqdm
 
-  setup = setup or make_setup(config, views)
+  setup = setup or make_setup(config, views, key=key)
   if bounds is None:
     lo, hi = config.data.init_bounds
     bounds = (np.full(3, lo), np.full(3, hi))
@@ -204,7 +223,7 @@ def train(config, views, *, setup=None, state=None, bounds=None, checkpoint_dir=
              desc=f"train {setup.spec.kind}", dynamic_ncols=True)
   t0 = time.perf_counter()
   while step < end:
-    view = jnp.int32(view_for_step(config.seed, step, len(views)))
+    view = jnp.int32(view_for_step(setup.seed, step, len(views)))
     rows = setup.sobol[step * m:(step + 1) * m]
     new_state, metrics = step_fn(state, views.images, views.cameras, view, rows)
     if bool(metrics.overflow):  # nothing was updated: grow the budget and redo the step
@@ -274,7 +293,7 @@ def train_and_evaluate(config, workdir):
   if model.spec.stochastic and config.eval.uncertainty_samples > 0:
     from mfsample import samplers
     m = int(config.eval.uncertainty_samples)
-    key = jax.random.PRNGKey(int(config.seed) + 3)
+    key = jax.random.PRNGKey(setup.seed + 3)
     rows = sobol_z(m, model.spec.rank, int(config.sampler.z_seed) + 1) \
         if model.spec.kind == "lowrank" else None
     z = samplers.draw_z(model, m, key, rows)

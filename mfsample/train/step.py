@@ -192,6 +192,10 @@ def train_step(state: TrainState, images, cameras, view, sobol_rows, *, cfg: Ste
   )
   new_state = TrainState(step + 1, new_model, opt_state, new_stats, state.key)
 
+  # On overflow the step is void: keep the old state. A select fuses into the elementwise
+  # updates (a lax.cond would copy the whole state); the shape check, at trace time, keeps
+  # it from silently broadcasting a malformed state.
+  chex.assert_trees_all_equal_shapes_and_dtypes(state, new_state)
   overflow = jnp.any(stats.overflow)
   new_state = jax.tree.map(lambda old, new: jnp.where(overflow, old, new), state, new_state)
   metrics = StepMetrics(loss=loss, data_loss=data, volume=volume, overflow=overflow,
