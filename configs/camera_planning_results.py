@@ -17,5 +17,6 @@ def get_config():
   config.seeds = (0, 1, 2)
   config.rounds.steps = 300  # Per (re-initialised) round, at 32 x 32 (authors: 2000).
   config.final_train.train.num_steps = 600  # Authors: 7000.
+  config.data.num_test = 50  # Held-out test views.
   config.data.progress = False
   return config
