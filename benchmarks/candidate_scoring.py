@@ -43,9 +43,9 @@ def run():
   import jax
   import jax.numpy as jnp
   import numpy as np
-  from mfsample.model import GROUPS, SamplerSpec, init_model
 
   from mfsample import uncertainty as unc
+  from mfsample.model import GROUPS, SamplerSpec, init_model
   from mfsample.planning import fisher, poses
   from mfsample.render import RenderSettings
 
@@ -63,7 +63,10 @@ def run():
   cams = poses.spherical_camera(jnp.asarray(uv), sphere)
   bg = jnp.ones(3)
   z = unc.uncertainty_z(model, _M.value, 6174)
-  _, settings = unc.score_cameras(model, cams, z, settings=RenderSettings(), background=bg)
+  # The smallest power-of-two budget that holds every candidate (a forward render's cost
+  # grows with the budget: the tile sort spans all of it).
+  _, settings = unc.score_cameras(model, cams, z,
+                                  settings=RenderSettings(max_intersections=512), background=bg)
   det = model.replace(spec=SamplerSpec("deterministic"), params=model.params._replace(
       spread={}), signs={})
 
