@@ -133,7 +133,10 @@ def test_3dgs_rules_on_a_stack_of_opaque_gaussians():
 
 
 def test_gradients_match_float64_finite_differences():
-  """Directional derivatives along random directions, one parameter group at a time."""
+  """Directional derivatives along random directions, one parameter group at a time.
+
+  `offset` is the 2D-centre offset whose gradient densification thresholds.
+  """
   fields = ("means", "scales", "quats", "opacities", "sh")
   with jax.enable_x64(True):
     g = random_gaussians(40, sh_degree=2, seed=11, scale_range=(0.05, 0.3),
@@ -150,12 +153,14 @@ def test_gradients_match_float64_finite_differences():
                         [-omega[1], omega[0], 0]])
       delta = jnp.eye(4).at[:3, :3].set(jax.scipy.linalg.expm(skew)).at[:3, 3].set(t)
       camera = replace(cam, world_to_camera=delta @ cam.world_to_camera)
-      out = render(gaussians, camera, background=jnp.array([0.3, 0.3, 0.3]), settings=SMALL)
+      out = render(gaussians, camera, background=jnp.array([0.3, 0.3, 0.3]), settings=SMALL,
+                   screen_offset=params["offset"])
       return (jnp.sum(weights[..., :3] * out.rgb) + jnp.sum(weights[..., 3] * out.alpha)
               + 0.1 * jnp.sum(weights[..., 4] * out.depth))
 
     params = {f: getattr(g, f) for f in fields}
     params["pose"] = jnp.zeros(6)
+    params["offset"] = jnp.zeros((g.num_gaussians, 2))
     f = jax.jit(loss)
     jvp = jax.jit(lambda p, d: jax.jvp(loss, (p,), (d,))[1])
     grad = jax.jit(jax.grad(loss))(params)
@@ -346,6 +351,23 @@ def test_features_are_composited_like_colours():
   grad = jax.grad(lambda f: jnp.sum(render(gaussians, cam, features=f, settings=SMALL).rgb))(
       feats)
   assert np.all(np.isfinite(grad)) and float(jnp.abs(grad).sum()) > 0
+
+
+def test_screen_offset_moves_the_2d_centres_and_reports_footprints():
+  """Training differentiates w.r.t. a zero `screen_offset` to get dL/d(2D centres)."""
+  g, cam = hard_scene(0)
+  base = render(g, cam, settings=SMALL)
+  zero = render(g, cam, settings=SMALL, screen_offset=jnp.zeros((g.num_gaussians, 2)))
+  np.testing.assert_array_equal(np.asarray(zero.rgb), np.asarray(base.rgb))
+  assert base.radii.shape == base.visible.shape == (g.num_gaussians,)
+  np.testing.assert_array_equal(np.asarray(base.radii)[~np.asarray(base.visible)], 0.0)
+  assert 0 < int(base.visible.sum()) < g.num_gaussians  # the scene has culled Gaussians
+
+  # The gradient itself is checked against finite differences in float64 above.
+  loss = lambda off: jnp.sum(render(g, cam, settings=SMALL, screen_offset=off).rgb)
+  grad = jax.grad(loss)(jnp.zeros((g.num_gaussians, 2)))
+  assert np.all(np.isfinite(grad)) and np.any(np.asarray(grad) != 0)
+  np.testing.assert_array_equal(np.asarray(grad)[~np.asarray(base.visible)], 0.0)
 
 
 def test_masked_gaussians_change_nothing_and_get_no_gradient():

@@ -12,14 +12,12 @@ from conftest import tiny_config
 
 from mfsample import samplers
 from mfsample.export_ply import read_ply
-from mfsample.model import mean_gaussians
 from mfsample.render import render
 from mfsample.train import checkpoint as ckpt
 from mfsample.train import data as data_lib
 from mfsample.train import densify as densify_lib
 from mfsample.train import evaluate as eval_lib
 from mfsample.train import loop, losses
-from mfsample.train.render_train import render_for_training
 from mfsample.train.step import make_train_step
 
 KINDS = ("deterministic", "diagonal", "block", "lowrank")
@@ -228,20 +226,6 @@ def test_opacity_reset_and_capacity_growth(runs):
   for a, b in zip(jax.tree.leaves(state.opt_state[0].mu), jax.tree.leaves(
       grown.opt_state[0].mu), strict=True):
     np.testing.assert_array_equal(np.asarray(b)[:a.shape[0]], np.asarray(a))
-
-
-def test_render_for_training_matches_render(runs):
-  run = runs["lowrank"]
-  g = mean_gaussians(run.state0.model)
-  camera = run.views.cameras[1]
-  settings = run.setup.step_config.settings
-  bg = jnp.asarray([0.2, 0.3, 0.4])
-  ref = render(g, camera, background=bg, settings=settings)
-  out = jax.jit(render_for_training, static_argnames="settings")(
-      g, camera, jnp.zeros((g.num_gaussians, 2)), background=bg, settings=settings)
-  np.testing.assert_array_equal(np.asarray(out.rgb), np.asarray(ref.rgb))
-  np.testing.assert_array_equal(np.asarray(out.alpha), np.asarray(ref.alpha))
-  assert int(out.stats.num_padded) == int(ref.stats.num_padded)
 
 
 @pytest.mark.parametrize("kind,rank", [("lowrank", 1), ("lowrank", 64)])

@@ -25,12 +25,17 @@ class RenderOutput(NamedTuple):
     depth: [H, W] alpha-weighted camera z-depth, sum_i w_i z_i, *not* normalised by alpha:
       it fades to 0 where alpha does. `expected_depth()` divides it out.
     stats: `TileStats` (intersections, busiest tile, overflow flag).
+    radii: [N] screen-space radius in pixels of each Gaussian's footprint (0 when culled;
+      no gradient). Training prunes Gaussians that grow too large on screen.
+    visible: [N] bool, projected in front of the near plane, on screen and live.
   """
 
   rgb: chex.Array
   alpha: chex.Array
   depth: chex.Array
   stats: TileStats
+  radii: chex.Array
+  visible: chex.Array
 
   def expected_depth(self, eps=1e-6):
     """[H, W] depth / alpha: the mean z of what was hit (0 where alpha <= eps)."""
@@ -40,7 +45,8 @@ class RenderOutput(NamedTuple):
 
 @functools.partial(jax.jit, static_argnames=("settings",))
 def render(gaussians: Gaussians, camera: Camera, *, background=None,
-           settings: RenderSettings = RenderSettings(), features=None) -> RenderOutput:
+           settings: RenderSettings = RenderSettings(), features=None,
+           screen_offset=None) -> RenderOutput:
   """Renders Gaussians into one camera with the tile-based 3DGS rasteriser.
 
   Differentiable w.r.t. every array in `gaussians`, `camera` (pose and intrinsics),
@@ -55,6 +61,9 @@ def render(gaussians: Gaussians, camera: Camera, *, background=None,
     settings: `RenderSettings` (static).
     features: optional [N, F] per-Gaussian values blended instead of the SH colour
       (uncertainty maps, relighting). The output `rgb` then has F channels and no clamping.
+    screen_offset: optional [N, 2] pixel offset added to the projected 2D centres. Pass
+      zeros and differentiate w.r.t. it to get the loss gradient w.r.t. the screen-space
+      centres, which 3DGS densification thresholds (Kerbl et al. 2023, Sec. 5.2).
 
   Returns:
     `RenderOutput`.
@@ -73,10 +82,15 @@ def render(gaussians: Gaussians, camera: Camera, *, background=None,
       raise ValueError(f"features must have shape [N={n}, F], got {features.shape}")
     if not jnp.issubdtype(features.dtype, jnp.floating):
       raise ValueError(f"features must be floating point, got {features.dtype}")
+  if screen_offset is not None:
+    screen_offset = jnp.asarray(screen_offset)
+    chex.assert_shape(screen_offset, (n, 2))
   if n == 0:  # one masked placeholder keeps every array non-empty
     gaussians = Gaussians.empty(1, gaussians.sh_degree, dtype)
     if features is not None:
       features = jnp.zeros((1, features.shape[1]), features.dtype)
+    if screen_offset is not None:
+      screen_offset = jnp.zeros((1, 2), dtype)
 
   proj = project_gaussians(gaussians.means, gaussians.scales, gaussians.quats,
                            gaussians.opacities, gaussians.mask, camera, settings)
@@ -91,12 +105,15 @@ def render(gaussians: Gaussians, camera: Camera, *, background=None,
   background = jnp.asarray(background, dtype)
   chex.assert_shape(background, (num_channels,))
 
+  means2d = proj.means2d
+  if screen_offset is not None:
+    means2d = means2d + jnp.where(proj.valid[:, None], screen_offset.astype(dtype), 0.0)
   layout = intersect_tiles(proj, camera.width, camera.height, settings)
   blend_in = jnp.concatenate([colors, proj.depths[:, None]], axis=-1)
   opacities = jnp.where(proj.valid, gaussians.opacities, 0.0)
-  blended, alpha = composite(layout, proj.means2d, proj.conics, opacities, blend_in,
+  blended, alpha = composite(layout, means2d, proj.conics, opacities, blend_in,
                              camera.width, camera.height, settings)
   rgb = blended[..., :num_channels] + (1.0 - alpha)[..., None] * background
   return RenderOutput(rgb=rgb, alpha=alpha, depth=blended[..., num_channels],
-                      stats=layout.stats)
+                      stats=layout.stats, radii=proj.radii[:n], visible=proj.valid[:n])
 

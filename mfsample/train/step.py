@@ -19,9 +19,9 @@ import optax
 
 from mfsample import samplers
 from mfsample.model import Model, project_spread
+from mfsample.render.render import render
 from mfsample.render.settings import RenderSettings
 from mfsample.train import losses, optim
-from mfsample.train.render_train import render_for_training
 
 
 class DensifyStats(NamedTuple):
@@ -156,8 +156,8 @@ def train_step(state: TrainState, images, cameras, view, sobol_rows, *, cfg: Ste
     m = model.replace(params=params)
 
     def one(z_i):
-      out = render_for_training(samplers.sample(m, z_i), camera, offset2d,
-                                background=cfg.background, settings=cfg.settings)
+      out = render(samplers.sample(m, z_i), camera, background=cfg.background,
+                   settings=cfg.settings, screen_offset=offset2d)
       return losses.photometric(out.rgb, image, cfg.ssim_weight), (out.radii, out.visible,
                                                                     out.stats)
 
