@@ -10,13 +10,18 @@ The public API on one screen:
   sample, mean_gaussians            theta(z) = mean + B_hat z as Gaussians; the mean model
   sobol_z, draw_z                   z for the samplers: scrambled Sobol / uniform in [-1, 1]
   train_and_evaluate                the training experiment (`mfsample.train.train` for Views)
+  uncertainty                       module: uncertainty(model, camera, z) -> U (Eq. 10)
+                                    and its per-pixel map; uncertainty_z; score_cameras
+  run_camera_planning               the active camera planning protocol (the main job)
   testing                           synthetic scenes for tests, benchmarks and notebooks
 """
 
-from mfsample import testing
+# `uncertainty` is the module: exporting its function of the same name would shadow it.
+from mfsample import testing, uncertainty
 from mfsample.camera import Camera
 from mfsample.gaussians import Gaussians
 from mfsample.model import Model, SamplerSpec, mean_gaussians
+from mfsample.planning import run_camera_planning
 from mfsample.render import RenderOutput, RenderSettings, TileStats, render
 from mfsample.render.budget import fit_budget, render_with_budget
 from mfsample.samplers import draw_z, sample, sobol_z
@@ -37,8 +42,10 @@ __all__ = [
     "mean_gaussians",
     "render",
     "render_with_budget",
+    "run_camera_planning",
     "sample",
     "sobol_z",
     "testing",
     "train_and_evaluate",
+    "uncertainty",
 ]

@@ -8,7 +8,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from mfsample import metrics, samplers
+from mfsample import metrics
+from mfsample import uncertainty as uncertainty_lib
 from mfsample.model import mean_gaussians
 from mfsample.render import render
 from mfsample.render.budget import render_with_budget
@@ -33,32 +34,6 @@ class EvalResult(NamedTuple):
 @functools.partial(jax.jit, static_argnames=("settings",))
 def _render_mean(model, camera, background, settings):
   return render(mean_gaussians(model), camera, background=background, settings=settings)
-
-
-@functools.partial(jax.jit, static_argnames=("settings",))
-def _render_samples(model, camera, zs, background, settings):
-  def one(z):
-    return render(samplers.sample(model, z), camera, background=background, settings=settings)
-  return jax.vmap(one)(zs)
-
-
-def pixel_variance(rgbs):
-  """Per-pixel uncertainty (Eq. 10 before the sum over pixels): [M, H, W, 3] -> [H, W].
-
-  (1/M) sum_samples ||C_sample - C_mean||^2, with C_mean the mean over the M samples.
-  """
-  mean = jnp.mean(rgbs, axis=0, keepdims=True)
-  return jnp.mean(jnp.sum(jnp.square(rgbs - mean), axis=-1), axis=0)
-
-
-def uncertainty_map(model, camera, zs, *, background, settings):
-  """[H, W] per-pixel variance of `model` seen from `camera` over the samples `zs` [M, ...].
-
-  Returns (map, settings that sufficed).
-  """
-  out, settings = render_with_budget(_render_samples, settings, model, camera, zs,
-                                     background)
-  return pixel_variance(out.rgb), settings
 
 
 def evaluate(model, views, *, background, settings, lpips_fn=None, uncertainty_z=None):
@@ -89,9 +64,9 @@ def evaluate(model, views, *, background, settings, lpips_fn=None, uncertainty_z
       lpipss.append(float(lpips_fn(pred, gt)))
     images.append(np.asarray(pred))
     if uncertainty_z is not None and model.spec.stochastic:
-      u, settings = uncertainty_map(model, camera, uncertainty_z, background=bg,
-                                    settings=settings)
-      unc.append(np.asarray(u))
+      u, settings = render_with_budget(uncertainty_lib.uncertainty, settings, model, camera,
+                                       uncertainty_z, background=bg)
+      unc.append(np.asarray(u.pixel_map))
   summary = {"psnr": float(np.mean(psnrs)), "ssim": float(np.mean(ssims)),
              "lpips": float(np.mean(lpipss)) if lpipss else None, "num_views": len(views)}
   per_view = {"psnr": psnrs, "ssim": ssims, "lpips": lpipss or None}
