@@ -31,7 +31,7 @@ _WARMUP = flags.DEFINE_integer("warmup", 3, "Untimed steps after compilation.")
 _SIZE = flags.DEFINE_integer("size", 200, "Image side in pixels (lego downscale 400/size).")
 _POINTS = flags.DEFINE_integer("points", 10_000, "Gaussians of the initial cloud.")
 _SAMPLES = flags.DEFINE_integer("samples", 1, "M, samples per step.")
-_DATA = flags.DEFINE_string("data", "/work/shared/data/lego",
+_DATA = flags.DEFINE_string("data", "../shared/data/lego",
                             "NeRF Synthetic lego folder (synthetic scene if absent).")
 _FROM = flags.DEFINE_string(
     "from_checkpoints", None,

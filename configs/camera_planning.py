@@ -8,7 +8,7 @@ densification, 150 steps per (re-initialised) round at 32 x 32, where candidates
 scored, and 250 final steps.
 Every number is a field below; `configs/camera_planning_results.py` runs more seeds.
 
-  PYTHONPATH=. python experiments/camera_planning.py --config=configs/camera_planning.py \
+  python experiments/camera_planning.py --config=configs/camera_planning.py \
       --workdir=workdirs/camera_planning
 """
 

@@ -5,7 +5,7 @@ Candidates = the 100 training views, test = the test split (every 4th of 200 vie
 variants (Opt. Sel., Opt. Rnd.) are not run (paper Sec. 5.1 does the same for Mip-NeRF
 360). Three seeds (initial view, initialisation, random choices).
 
-  PYTHONPATH=. python experiments/camera_planning.py --config=configs/camera_planning_lego.py \
+  python experiments/camera_planning.py --config=configs/camera_planning_lego.py \
       --workdir=workdirs/camera_planning_lego
 """
 

@@ -1,14 +1,20 @@
 """Active camera planning: every strategy, rounds of training, final evaluation, figures.
 
-  PYTHONPATH=. python experiments/camera_planning.py --config=configs/camera_planning.py \
+  python experiments/camera_planning.py --config=configs/camera_planning.py \
       --workdir=workdirs/camera_planning
 
 Writes results.json, table.md (paper Table 1 layout), cameras.png and landscape.png to the
 workdir. Re-running with the same workdir skips the (strategy, seed) runs already done.
 """
 
+import sys
+from pathlib import Path
+
 from absl import app, flags
 from ml_collections import config_flags
+
+# The config files import each other as `configs.*`; configs/ is not an installed package.
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from mfsample.planning import run_camera_planning
 

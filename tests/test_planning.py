@@ -239,6 +239,10 @@ def test_protocol_runs_end_to_end_and_resumes(tmp_path):
   again = runner.run_camera_planning(config, str(tmp_path))
   assert os.path.getmtime(run_file) == stamp
   assert json.loads(run_file.read_text())["indices"] == again["runs"][0]["indices"]
+  # Finished runs of another protocol are never mixed into one table.
+  config.rounds.steps += 1
+  with pytest.raises(ValueError, match="different config.*rounds"):
+    runner.run_camera_planning(config, str(tmp_path))
 
 
 def test_table_layout_has_mean_and_std():

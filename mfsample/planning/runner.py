@@ -384,6 +384,36 @@ def _write_json(path, obj):
 # ------------------------------------------------------------------ the loop
 
 
+# Fields that may change between calls on one workdir: which runs to do, and presentation.
+_RESUME_FREE_FIELDS = ("seeds", "strategies", "progress", "figures", "data.progress")
+
+
+def _comparable_config(config_dict):
+  d = json.loads(json.dumps(config_dict))
+  for field in _RESUME_FREE_FIELDS:
+    *parents, leaf = field.split(".")
+    node = d
+    for p in parents:
+      node = node.get(p, {})
+    node.pop(leaf, None)
+  return d
+
+
+def _check_resumable(config, workdir):
+  """Refuses to add runs to a workdir whose finished runs used a different protocol."""
+  path = os.path.join(workdir, "config.json")
+  if not os.path.exists(path) or not os.listdir(os.path.join(workdir, "runs")):
+    return
+  with open(path) as f:
+    old = _comparable_config(json.load(f))
+  new = _comparable_config(json.loads(config.to_json_best_effort()))
+  if old != new:
+    changed = sorted(k for k in set(old) | set(new) if old.get(k) != new.get(k))
+    raise ValueError(
+        f"{workdir} holds runs made with a different config (differences under: "
+        f"{', '.join(changed)}); use a new --workdir, or remove {workdir}/runs to redo them.")
+
+
 def run_camera_planning(config, workdir):
   """Runs the protocol for every seed and strategy of `config`; writes and returns results.
 
@@ -398,6 +428,7 @@ def run_camera_planning(config, workdir):
 
   t_start = time.perf_counter()
   os.makedirs(os.path.join(workdir, "runs"), exist_ok=True)
+  _check_resumable(config, workdir)
   with open(os.path.join(workdir, "config.json"), "w") as f:
     f.write(config.to_json_best_effort(indent=2))
   t0 = time.perf_counter()
