@@ -25,7 +25,6 @@ def get_config():
     t.data.extent = 4.4  # 1.1 x the camera distance (4.03).
     t.model.init_points = 3_000  # More pixels than the default scene's 64 x 64.
     t.render.max_intersections = 1 << 15
-  config.rounds.steps = 300  # As camera_planning_results, at 40 x 40 (authors: 2000).
-  config.final_train.train.num_steps = 600  # Authors: 7000.
+  # Round and final steps as the main job (150 per round at 40 x 40, 250 final).
   config.strategy.score_downscale = 2  # Candidates scored at 40 x 40.
   return config
