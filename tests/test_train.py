@@ -311,3 +311,15 @@ def test_two_samples_per_step(tiny_dataset):
   assert per_sample[0] != per_sample[1]
   np.testing.assert_allclose(float(metrics.data_loss), np.mean(per_sample), rtol=1e-5)
   chex.assert_tree_all_finite(state)
+
+
+def test_saved_images_flatten_path_like_view_names(tiny_dataset, tmp_path):
+  """NeRF Synthetic frames are named like "./test/r_0": one flat PNG per view."""
+  views = tiny_dataset.test.subset([0, 1])
+  views = views.replace(names=("./test/r_0", "./test/r_1"))
+  images = np.asarray(views.images)
+  result = eval_lib.EvalResult({}, {}, images, np.ones(images.shape[:3], np.float32))
+  eval_lib.save_images(str(tmp_path), result, views)
+  written = sorted(p.name for p in tmp_path.iterdir())
+  assert "test_r_0_render.png" in written and "test_r_1_uncertainty.png" in written
+  assert "uncertainty.npy" in written

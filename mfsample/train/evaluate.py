@@ -2,6 +2,7 @@
 
 import functools
 import os
+import re
 from typing import NamedTuple
 
 import jax
@@ -85,6 +86,8 @@ def save_images(directory, result: EvalResult, views, num=None):
   num = len(views) if num is None else min(num, len(views))
   to8 = lambda x: (np.clip(np.asarray(x), 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
   names = views.names or tuple(f"view_{i:03d}" for i in range(len(views)))
+  # NeRF Synthetic names are paths ("./test/r_0"): one flat file name per view.
+  names = [re.sub(r"[^\w.-]+", "_", n.removeprefix("./")).strip("_") for n in names]
   if result.uncertainty is not None:
     scale = max(float(np.max(result.uncertainty[:num])), 1e-12)
     np.save(os.path.join(directory, "uncertainty.npy"), result.uncertainty[:num])
