@@ -61,7 +61,7 @@ def _load_run(workdir):
                                  os.path.join(workdir, "checkpoints"))
   if restored is None:
     raise FileNotFoundError(f"no checkpoint in {workdir}/checkpoints")
-  state, setup = restored
+  state, setup, _ = restored
   return config, dataset, state.model, setup.step_config.settings
 
 

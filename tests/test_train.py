@@ -258,7 +258,7 @@ def resume_config():
       "model.init_points": 200, "model.max_gaussians": 256, "train.num_steps": 16,
       "train.checkpoint_every": 8, "densify.start": 5, "densify.every": 5,
       "densify.stop": 15, "render.max_intersections": 512, "loss.volume_stop_before_end": 2,
-      "loss.volume_every": 3})
+      "loss.volume_every": 3, "train.log_every": 5})
 
 
 def test_resumed_run_matches_an_uninterrupted_one(tiny_dataset, tmp_path):
@@ -287,9 +287,19 @@ def test_resumed_run_matches_an_uninterrupted_one(tiny_dataset, tmp_path):
   assert any(name.endswith("_render.png") for name in images)
   ply = read_ply(os.path.join(workdir, "point_cloud.ply"))
   assert len(ply["x"]) == resumed.model.num_live
+  # The log survives the kill: every logged step once, in order, and the time of the
+  # killed segment (steps 1-8) is counted in the total.
+  with open(os.path.join(workdir, "train_log.json")) as f:
+    log = json.load(f)
+  assert [e["step"] for e in log] == [e["step"] for e in straight.history]
+  assert all(b["seconds"] >= a["seconds"] for a, b in zip(log[:-1], log[1:], strict=True))
+  assert metrics["train_seconds"] > log[0]["seconds"] > 0
   # Re-running a finished run only re-evaluates: nothing is trained twice.
   again = loop.train_and_evaluate(config, workdir)
   assert int(again.step) == 16
+  with open(os.path.join(workdir, "metrics.json")) as f:
+    # (plus the moment this call spent restoring; no step was timed twice)
+    assert json.load(f)["train_seconds"] == pytest.approx(metrics["train_seconds"], abs=1.0)
 
 
 def test_two_samples_per_step(tiny_dataset):

@@ -44,8 +44,11 @@ class TrainResult(NamedTuple):
 
   state: TrainState
   setup: TrainSetup  # with the render budget that sufficed
-  history: list  # dicts logged every `config.train.log_every` steps
+  # Dicts logged every `config.train.log_every` steps, from step 0: a resumed run carries
+  # the log of the checkpoint it started from, so nothing is lost or logged twice.
+  history: list
   seconds: float  # wall-clock of the steps run in this call (compilation included)
+  train_seconds: float  # wall-clock of all the steps, summed over resumed segments
 
 
 # ------------------------------------------------------------------------- setup
@@ -134,16 +137,20 @@ def view_for_step(seed, step, num_views):
 # ------------------------------------------------------------------------- training
 
 
-def _meta(config, setup, state):
+def _meta(config, setup, state, history, train_seconds):
   return {"step": int(state.step), "capacity": int(state.model.capacity),
           "max_intersections": int(setup.step_config.settings.max_intersections),
           "seed": setup.seed, "sobol_seed": int(config.sampler.z_seed),
           "sobol_position": int(state.step) * setup.step_config.num_samples,
-          "extent": setup.extent}
+          "extent": setup.extent, "history": history, "train_seconds": train_seconds}
 
 
 def restore_latest(config, setup, bounds, directory):
-  """(state, setup) from the newest checkpoint in `directory`, or None if there is none."""
+  """(state, setup, meta) from the newest checkpoint in `directory`, or None if none.
+
+  `meta` holds the training log up to that step ("history") and the wall-clock spent
+  reaching it ("train_seconds").
+  """
   paths = ckpt.list_checkpoints(directory)
   if not paths:
     return None
@@ -156,7 +163,7 @@ def restore_latest(config, setup, bounds, directory):
   state, meta = ckpt.restore_checkpoint(paths[-1], template)
   settings = setup.step_config.settings.replace(max_intersections=meta["max_intersections"])
   setup = setup._replace(step_config=dataclasses.replace(setup.step_config, settings=settings))
-  return state, setup
+  return state, setup, meta
 
 
 def _host_events(config, setup, state, step):
@@ -207,10 +214,13 @@ def train(config, views, key=None, *, setup=None, state=None, bounds=None,
   if bounds is None:
     lo, hi = config.data.init_bounds
     bounds = (np.full(3, lo), np.full(3, hi))
+  history, seconds_before = [], 0.0
   if state is None and checkpoint_dir:
     restored = restore_latest(config, setup, bounds, checkpoint_dir)
     if restored is not None:
-      state, setup = restored
+      state, setup, meta = restored
+      history = list(meta.get("history", []))
+      seconds_before = float(meta.get("train_seconds", 0.0))
   if state is None:
     state = init_state(config, setup, bounds)
   views = data_lib.to_device(views)
@@ -218,7 +228,6 @@ def train(config, views, key=None, *, setup=None, state=None, bounds=None,
   step_fn = make_train_step(setup.step_config, max_traces)
   step = int(state.step)
   end = setup.num_steps if stop_at is None else min(stop_at, setup.num_steps)
-  history = []
   bar = tqdm(total=setup.num_steps, initial=step, disable=not config.train.progress,
              desc=f"train {setup.spec.kind}", dynamic_ncols=True)
   t0 = time.perf_counter()
@@ -243,7 +252,7 @@ def train(config, views, key=None, *, setup=None, state=None, bounds=None,
                "volume": float(metrics.volume), "live": state.model.num_live,
                "capacity": state.model.capacity,
                "budget": setup.step_config.settings.max_intersections,
-               "seconds": time.perf_counter() - t0}
+               "seconds": seconds_before + time.perf_counter() - t0}
       if report is not None:
         entry["densify"] = report._asdict()
       history.append(entry)
@@ -251,10 +260,11 @@ def train(config, views, key=None, *, setup=None, state=None, bounds=None,
     bar.update(1)
     if checkpoint_dir and (step % config.train.checkpoint_every == 0
                            or (step == setup.num_steps)):
-      ckpt.save_checkpoint(checkpoint_dir, state, _meta(config, setup, state),
-                           keep=config.train.keep_checkpoints)
+      meta = _meta(config, setup, state, history, seconds_before + time.perf_counter() - t0)
+      ckpt.save_checkpoint(checkpoint_dir, state, meta, keep=config.train.keep_checkpoints)
   bar.close()
-  return TrainResult(state, setup, history, time.perf_counter() - t0)
+  seconds = time.perf_counter() - t0
+  return TrainResult(state, setup, history, seconds, seconds_before + seconds)
 
 
 # ------------------------------------------------------------------------- experiment
@@ -280,12 +290,7 @@ def train_and_evaluate(config, workdir):
   result = train(config, dataset.train, bounds=dataset.bounds,
                  checkpoint_dir=os.path.join(workdir, "checkpoints"))
   state, setup = result.state, result.setup
-  log_path = os.path.join(workdir, "train_log.json")
-  previous = []
-  if os.path.exists(log_path):
-    with open(log_path) as f:
-      previous = json.load(f)
-  _write_json(log_path, previous + result.history)
+  _write_json(os.path.join(workdir, "train_log.json"), result.history)
 
   lpips_fn = metrics.make_lpips(config.eval.lpips_net) if config.eval.lpips_net else None
   model = state.model
@@ -306,26 +311,16 @@ def train_and_evaluate(config, workdir):
                        num=config.eval.save_images)
   if config.eval.export_ply:
     export_ply.export_ply(os.path.join(workdir, "point_cloud.ply"), model)
-  train_seconds = sum(e["seconds"] for e in _last_segments(previous + result.history))
   summary = dict(ev.metrics)
   summary.update({
       "sampler": model.spec.kind, "rank": model.spec.rank,
       "steps": int(state.step), "live_gaussians": model.num_live,
-      "train_seconds": train_seconds, "eval_seconds": eval_seconds,
+      "train_seconds": result.train_seconds, "eval_seconds": eval_seconds,
       "resolution": [int(dataset.train.images.shape[2]), int(dataset.train.images.shape[1])],
       "num_train_views": len(dataset.train), "per_view": ev.per_view,
   })
   _write_json(os.path.join(workdir, "metrics.json"), summary)
   return state
-
-
-def _last_segments(history):
-  """The last log entry of each run segment (seconds restart at 0 when a run resumes)."""
-  out = []
-  for i, e in enumerate(history):
-    if i + 1 == len(history) or history[i + 1]["seconds"] < e["seconds"]:
-      out.append(e)
-  return out
 
 
 def _write_json(path, obj):
