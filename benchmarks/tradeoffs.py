@@ -7,10 +7,12 @@ Every curve pairs a time with an accuracy, in one process on one machine:
   several scramblings);
 * scoring resolution (`strategy.score_downscale`): time per candidate vs the rank
   correlation of the candidates' U with U at full resolution (same z);
-* SH degree: forward render time vs test PSNR when a degree-3 model is evaluated with its
-  higher bands switched off (truncation, not retraining: an upper bound on the loss);
+* SH degree: forward render time vs test PSNR of a trained degree-3 model cut to its first
+  (d + 1)^2 coefficients (truncation, not retraining: an upper bound on the loss);
 * Gaussian budget: forward render time vs test PSNR when only the K most opaque Gaussians
-  are kept (pruning, not retraining);
+  are kept (pruning, not retraining).
+Both render compact arrays (live Gaussians only, only the SH bands kept), so the time
+is what a model of that size costs;
 * rank k and the sampler kind: read from `results/train_step.json` (ms per step, peak
   memory) when `benchmarks/train_step.py` has been run.
 
@@ -160,50 +162,69 @@ def _downscaled(cameras, d):
   return downscale_cameras(cameras, d)
 
 
-def _psnr_and_time(model, views, settings, background):
+def _psnr_and_time(gaussians, views, settings, background):
+  """Mean test PSNR of `gaussians` and the median forward render time of one view (ms)."""
   import jax
   import jax.numpy as jnp
   import numpy as np
 
   from mfsample import metrics
-  from mfsample.model import mean_gaussians
   from mfsample.render import render
-  from mfsample.render.budget import render_with_budget
+  from mfsample.render.budget import fit_budget, render_with_budget
 
   psnrs = []
   for i in range(len(views)):
-    out, settings = render_with_budget(render, settings, mean_gaussians(model),
-                                       views.cameras[i], background=background)
+    out, settings = render_with_budget(render, settings, gaussians, views.cameras[i],
+                                       background=background)
     psnrs.append(float(metrics.psnr(jnp.clip(out.rgb, 0, 1), jnp.asarray(views.images[i]))))
-  g = mean_gaussians(model)
+  # Time with the smallest budget that fits (the forward cost grows with the budget).
+  settings = fit_budget(settings.replace(max_intersections=1024),
+                        render(gaussians, views.cameras[0], background=background,
+                               settings=settings.replace(max_intersections=1024)).stats)
+  settings = render_with_budget(render, settings, gaussians, views.cameras[0],
+                                background=background)[1]
   fn = jax.jit(lambda g, c: render(g, c, background=background, settings=settings).rgb)
-  seconds = _timed(lambda: fn(g, views.cameras[0]), repeats=5)[1]
+  seconds = _timed(lambda: fn(gaussians, views.cameras[0]), repeats=5)[1]
   return float(np.mean(psnrs)), 1e3 * seconds
 
 
+def _rows(gaussians, index):
+  """The Gaussians at `index` as a compact array (no masked padding left to project)."""
+  import jax
+
+  from mfsample._pytree import replace
+
+  g = jax.tree.map(lambda x: x[index], replace(gaussians, mask=None))
+  return g
+
+
 def sh_and_budget(workdir):
+  """Test PSNR and forward time of compact models: fewer SH bands, fewer Gaussians."""
   import jax.numpy as jnp
   import numpy as np
+
+  from mfsample._pytree import replace
+  from mfsample.model import mean_gaussians
 
   config, dataset, model, settings = _load_run(workdir)
   bg = jnp.asarray(dataset.background, jnp.float32)
   test = dataset.test
   idx = np.linspace(0, len(test) - 1, min(_TEST_VIEWS.value, len(test))).round().astype(int)
   test = test.subset(list(idx))
-  out = {"run": workdir, "live_gaussians": model.num_live, "test_views": len(test),
+  live = np.flatnonzero(np.asarray(model.mask))
+  full = _rows(mean_gaussians(model), live)  # the live Gaussians only, degree 3
+  out = {"run": workdir, "live_gaussians": len(live), "test_views": len(test),
          "resolution": test.cameras.width, "sh_degree": [], "keep": []}
   for degree in range(model.max_sh_degree, -1, -1):
-    psnr, ms = _psnr_and_time(model.replace(sh_degree=jnp.int32(degree)), test, settings, bg)
+    g = replace(full, sh=full.sh[:, :(degree + 1) ** 2])  # the bands a degree-d model holds
+    psnr, ms = _psnr_and_time(g, test, settings, bg)
     out["sh_degree"].append({"degree": degree, "psnr": psnr, "forward_ms": ms})
     print(f"[sh] degree {degree}: PSNR {psnr:.2f} dB, forward {ms:.1f} ms", flush=True)
-  opacity = np.asarray(model.params.mean["opacity_logits"]).reshape(-1)
-  live = np.asarray(model.mask)
-  order = np.argsort(np.where(live, -opacity, np.inf))  # most opaque live Gaussians first
+  opacity = np.asarray(model.params.mean["opacity_logits"]).reshape(-1)[live]
+  order = np.argsort(-opacity)  # most opaque first
   for frac in map(float, _KEEP.value):
-    k = max(int(round(frac * live.sum())), 1)
-    mask = np.zeros_like(live)
-    mask[order[:k]] = True
-    psnr, ms = _psnr_and_time(model.replace(mask=jnp.asarray(mask)), test, settings, bg)
+    k = max(int(round(frac * len(live))), 1)
+    psnr, ms = _psnr_and_time(_rows(full, np.sort(order[:k])), test, settings, bg)
     out["keep"].append({"fraction": frac, "gaussians": k, "psnr": psnr, "forward_ms": ms})
     print(f"[budget] {k:6d} Gaussians: PSNR {psnr:.2f} dB, forward {ms:.1f} ms", flush=True)
   return out
