@@ -18,7 +18,8 @@ is what a model of that size costs;
 
 The trained models are the lego runs of `benchmarks/train_quality.py` (`--size=100`):
 
-  PYTHONPATH=. python benchmarks/tradeoffs.py --stochastic=workdirs/quality100/rank2 \
+  PYTHONPATH=. python benchmarks/tradeoffs.py \
+      --stochastic=workdirs/quality100/rank2_every_step \
       --deterministic=workdirs/quality100/deterministic
 """
 
@@ -30,8 +31,9 @@ import time
 
 from absl import app, flags
 
-_STOCHASTIC = flags.DEFINE_string("stochastic", "workdirs/quality100/rank2",
-                                  "Workdir of a trained rank-2 lego run (experiments/train.py).")
+_STOCHASTIC = flags.DEFINE_string(
+    "stochastic", "workdirs/quality100/rank2_every_step",
+    "Workdir of a rank-2 lego run that sampled at every step (its B_hat is trained).")
 _DETERMINISTIC = flags.DEFINE_string("deterministic", "workdirs/quality100/deterministic",
                                      "Workdir of a trained deterministic lego run.")
 _DATA = flags.DEFINE_string("data", "../shared/data/lego", "NeRF Synthetic lego folder.")
@@ -184,7 +186,7 @@ def _psnr_and_time(gaussians, views, settings, background):
   settings = render_with_budget(render, settings, gaussians, views.cameras[0],
                                 background=background)[1]
   fn = jax.jit(lambda g, c: render(g, c, background=background, settings=settings).rgb)
-  seconds = _timed(lambda: fn(gaussians, views.cameras[0]), repeats=5)[1]
+  seconds = _timed(lambda: fn(gaussians, views.cameras[0]), repeats=15)[1]
   return float(np.mean(psnrs)), 1e3 * seconds
 
 
