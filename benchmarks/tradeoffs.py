@@ -117,7 +117,7 @@ def samples_and_resolution(workdir):
   from mfsample import uncertainty as unc
   from mfsample.planning.poses import downscale_camera
 
-  config, dataset, model, settings = _load_run(workdir)
+  _, dataset, model, settings = _load_run(workdir)
   bg = jnp.asarray(dataset.background, jnp.float32)
   train = dataset.train
   idx = np.linspace(0, len(train) - 1, _CANDIDATES.value).round().astype(int)
@@ -172,7 +172,7 @@ def _psnr_and_time(gaussians, views, settings, background):
 
   from mfsample import metrics
   from mfsample.render import render
-  from mfsample.render.budget import fit_budget, render_with_budget
+  from mfsample.render.budget import render_with_budget
 
   psnrs = []
   for i in range(len(views)):
@@ -180,11 +180,8 @@ def _psnr_and_time(gaussians, views, settings, background):
                                        background=background)
     psnrs.append(float(metrics.psnr(jnp.clip(out.rgb, 0, 1), jnp.asarray(views.images[i]))))
   # Time with the smallest budget that fits (the forward cost grows with the budget).
-  settings = fit_budget(settings.replace(max_intersections=1024),
-                        render(gaussians, views.cameras[0], background=background,
-                               settings=settings.replace(max_intersections=1024)).stats)
-  settings = render_with_budget(render, settings, gaussians, views.cameras[0],
-                                background=background)[1]
+  settings = render_with_budget(render, settings.replace(max_intersections=1024), gaussians,
+                                views.cameras[0], background=background)[1]
   fn = jax.jit(lambda g, c: render(g, c, background=background, settings=settings).rgb)
   seconds = _timed(lambda: fn(gaussians, views.cameras[0]), repeats=15)[1]
   return float(np.mean(psnrs)), 1e3 * seconds
@@ -196,8 +193,7 @@ def _rows(gaussians, index):
 
   from mfsample._pytree import replace
 
-  g = jax.tree.map(lambda x: x[index], replace(gaussians, mask=None))
-  return g
+  return jax.tree.map(lambda x: x[index], replace(gaussians, mask=None))
 
 
 def sh_and_budget(workdir):
@@ -208,7 +204,7 @@ def sh_and_budget(workdir):
   from mfsample._pytree import replace
   from mfsample.model import mean_gaussians
 
-  config, dataset, model, settings = _load_run(workdir)
+  _, dataset, model, settings = _load_run(workdir)
   bg = jnp.asarray(dataset.background, jnp.float32)
   test = dataset.test
   idx = np.linspace(0, len(test) - 1, min(_TEST_VIEWS.value, len(test))).round().astype(int)
@@ -239,6 +235,14 @@ def rank_from_train_step(path="results/train_step.json"):
     return json.load(f)
 
 
+def _curve(ax, rows, x, y, label, **axis):
+  """One panel: `y` against `x` over `rows`, each point annotated with `label(row)`."""
+  ax.plot([r[x] for r in rows], [r[y] for r in rows], "o-")
+  for r in rows:
+    ax.annotate(label(r), (r[x], r[y]))
+  ax.set(**axis)
+
+
 def _plot(results, path):
   import matplotlib
 
@@ -246,27 +250,19 @@ def _plot(results, path):
   import matplotlib.pyplot as plt
 
   fig, axes = plt.subplots(1, 4, figsize=(17, 3.8))
-  s = results["uncertainty"]["samples"]
-  ax = axes[0]
-  ax.plot([r["ms_per_candidate"] for r in s], [r["median_relative_error"] for r in s], "o-")
-  for r in s:
-    ax.annotate(f"M={r['M']}", (r["ms_per_candidate"], r["median_relative_error"]))
-  ax.set(xlabel="ms per candidate", ylabel="median relative error of U",
-         title=f"samples M (ref. M={results['uncertainty']['reference_samples']})")
-  d = results["uncertainty"]["downscales"]
-  ax = axes[1]
-  ax.plot([r["ms_per_candidate"] for r in d], [r["spearman_vs_full"] for r in d], "o-")
-  for r in d:
-    ax.annotate(f"{r['resolution']}²", (r["ms_per_candidate"], r["spearman_vs_full"]))
-  ax.set(xlabel="ms per candidate", ylabel="rank correlation with full res.",
-         title="scoring resolution")
-  for ax, key, label, title in ((axes[2], "sh_degree", "degree", "SH degree (truncated)"),
-                                (axes[3], "keep", "gaussians", "Gaussian budget (pruned)")):
-    rows = results["rendering"][key]
-    ax.plot([r["forward_ms"] for r in rows], [r["psnr"] for r in rows], "o-")
-    for r in rows:
-      ax.annotate(str(r[label]), (r["forward_ms"], r["psnr"]))
-    ax.set(xlabel="forward render ms", ylabel="test PSNR (dB)", title=title)
+  unc, rend = results["uncertainty"], results["rendering"]
+  _curve(axes[0], unc["samples"], "ms_per_candidate", "median_relative_error",
+         lambda r: f"M={r['M']}", xlabel="ms per candidate",
+         ylabel="median relative error of U",
+         title=f"samples M (ref. M={unc['reference_samples']})")
+  _curve(axes[1], unc["downscales"], "ms_per_candidate", "spearman_vs_full",
+         lambda r: f"{r['resolution']}²", xlabel="ms per candidate",
+         ylabel="rank correlation with full res.", title="scoring resolution")
+  _curve(axes[2], rend["sh_degree"], "forward_ms", "psnr", lambda r: str(r["degree"]),
+         xlabel="forward render ms", ylabel="test PSNR (dB)", title="SH degree (truncated)")
+  _curve(axes[3], rend["keep"], "forward_ms", "psnr", lambda r: str(r["gaussians"]),
+         xlabel="forward render ms", ylabel="test PSNR (dB)",
+         title="Gaussian budget (pruned)")
   fig.tight_layout()
   fig.savefig(path, dpi=110)
   print(f"saved {path}")
