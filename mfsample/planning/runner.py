@@ -35,6 +35,7 @@ import numpy as np
 
 from mfsample import metrics as metrics_lib
 from mfsample import uncertainty as unc
+from mfsample.data._io import area_downscale
 from mfsample.data.views import Views
 from mfsample.model import mean_gaussians
 from mfsample.planning import figures, poses, strategies, training, variance
@@ -86,18 +87,9 @@ def as_views(selected, downscale=1) -> Views:
   images = np.stack([s.image for s in selected]).astype(np.float32)
   cameras = stack_cameras([s.camera for s in selected])
   if downscale > 1:
-    images = downscale_images(images, downscale)
+    images = np.stack([area_downscale(image, downscale) for image in images])
     cameras = poses.downscale_camera(cameras, downscale)
   return Views(images, cameras, names=tuple(str(view_key(s)) for s in selected))
-
-
-def downscale_images(images, factor):
-  """[..., H, W, C] -> [..., H / f, W / f, C], averaging f x f blocks (H, W divisible by f)."""
-  *lead, h, w, c = images.shape
-  if h % factor or w % factor:
-    raise ValueError(f"image size {w}x{h} is not divisible by {factor}")
-  blocks = images.reshape(*lead, h // factor, factor, w // factor, factor, c)
-  return blocks.mean(axis=(-4, -2))
 
 
 def round_config(config, kind):
