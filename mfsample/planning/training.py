@@ -5,8 +5,9 @@ The protocol trains a fresh model after every added view (METHOD.md Sec. 3). Cal
 times per model kind, because the step takes the stacked training images as an argument
 and their leading axis grows. `train_on_views` instead pads the images to a fixed number
 of slots (`pad_to`) and draws the step's view only among the real ones, with the training
-code's own `view_for_step`, so one compilation serves every round. Everything else (set-up,
-initial state, the jitted step, budget growth on overflow) is the training module's.
+code's own loop (`train(..., num_views=n)`), so one compilation serves every round:
+set-up, initial state, the jitted step and budget growth on overflow are the training
+module's.
 
 For the same reason the config must fix what would otherwise change with the views and
 sits in the step's static settings: `data.extent` and `loss.volume_weight` (the authors
@@ -18,15 +19,11 @@ Rounds run without densification (`densify.start >= train.num_steps`); the final
 """
 
 import dataclasses
-import time
 from typing import NamedTuple
 
-import jax.numpy as jnp
 import numpy as np
 
-from mfsample.render.budget import BudgetExceededError, fit_budget
-from mfsample.train import init_state, make_setup, make_train_step, train
-from mfsample.train.loop import view_for_step
+from mfsample.train import init_state, make_setup, train
 
 
 class Trained(NamedTuple):
@@ -94,47 +91,31 @@ def train_on_views(config, views, *, seed, bounds, pad_to, settings=None, state=
   if config.densify.start < config.train.num_steps:
     raise ValueError("planning rounds run without densification: set densify.start >= "
                      "train.num_steps (or use train_final)")
+  setup = _setup(config, views, settings)
+  if state is None:
+    state = init_state(config, setup, _box(bounds))
+  slots = np.minimum(np.arange(pad_to), n - 1)  # padding repeats the last view, never drawn
+  result = train(config, views.subset(slots), setup=setup, state=state, stop_at=stop_at,
+                 num_views=n)
+  return _trained(result, with_state=True)
+
+
+def _setup(config, views, settings):
   setup = make_setup(config, views)
   if settings is not None:
     setup = setup._replace(step_config=dataclasses.replace(setup.step_config,
                                                            settings=settings))
-  if state is None:
-    state = init_state(config, setup, _box(bounds))
-  end = setup.num_steps if stop_at is None else min(int(stop_at), setup.num_steps)
-  slots = np.minimum(np.arange(pad_to), n - 1)  # padding repeats the last view, never drawn
-  images = jnp.asarray(np.asarray(views.images)[slots], jnp.float32)
-  cameras = views.cameras[slots]
-  m = setup.step_config.num_samples
-  step_fn = make_train_step(setup.step_config)
-  start = time.perf_counter()
-  step, loss = int(state.step), float("nan")
-  while step < end:
-    view = jnp.int32(view_for_step(config.seed, step, n))
-    rows = setup.sobol[step * m:(step + 1) * m]
-    new_state, metrics = step_fn(state, images, cameras, view, rows)
-    if bool(metrics.overflow):  # the step left the state untouched: grow and redo it
-      grown = fit_budget(setup.step_config.settings, metrics)
-      if grown.max_intersections > config.render.max_budget:
-        raise BudgetExceededError(f"training needs {int(metrics.num_padded)} intersections, "
-                                  f"more than config.render.max_budget")
-      setup = setup._replace(step_config=dataclasses.replace(setup.step_config,
-                                                             settings=grown))
-      step_fn = make_train_step(setup.step_config)
-      continue
-    state, step = new_state, step + 1
-    loss = metrics.data_loss
-  loss = float(loss)
-  return Trained(state.model, setup.step_config.settings, time.perf_counter() - start, loss,
-                 state)
+  return setup
+
+
+def _trained(result, with_state=False) -> Trained:
+  loss = result.history[-1]["data_loss"] if result.history else float("nan")
+  return Trained(result.state.model, result.setup.step_config.settings, result.seconds, loss,
+                 result.state if with_state else None)
 
 
 def train_final(config, views, *, seed, bounds, settings=None) -> Trained:
   """Trains the final (plain) model on `views` with `mfsample.train.train` as it is."""
   config = _with_seed(config, seed)
-  setup = make_setup(config, views)
-  if settings is not None:
-    setup = setup._replace(step_config=dataclasses.replace(setup.step_config,
-                                                           settings=settings))
-  result = train(config, views, setup=setup, bounds=_box(bounds))
-  loss = result.history[-1]["data_loss"] if result.history else float("nan")
-  return Trained(result.state.model, result.setup.step_config.settings, result.seconds, loss)
+  result = train(config, views, setup=_setup(config, views, settings), bounds=_box(bounds))
+  return _trained(result)

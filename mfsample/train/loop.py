@@ -184,7 +184,7 @@ def _host_events(config, setup, state, step):
 
 
 def train(config, views, key=None, *, setup=None, state=None, bounds=None,
-          checkpoint_dir=None, stop_at=None, max_traces=None):
+          checkpoint_dir=None, stop_at=None, max_traces=None, num_views=None):
   """Trains a stochastic Gaussian field on `views` (reusable: planning calls this).
 
   Everything random is a function of the seed (`key` if given, else `config.seed`) and
@@ -204,6 +204,9 @@ def train(config, views, key=None, *, setup=None, state=None, bounds=None,
     stop_at: stop after this many steps without a final checkpoint, as a killed run
       would (tests use it).
     max_traces: passed to `make_train_step` (tests: 1).
+    num_views: draw the step's view among the first `num_views` of `views` only (default:
+      all). Callers that pad `views` to a fixed count keep one compilation of the step
+      while the number of real views grows (planning rounds).
 
   Returns:
     `TrainResult`.
@@ -228,11 +231,12 @@ def train(config, views, key=None, *, setup=None, state=None, bounds=None,
   step_fn = make_train_step(setup.step_config, max_traces)
   step = int(state.step)
   end = setup.num_steps if stop_at is None else min(stop_at, setup.num_steps)
+  num_views = len(views) if num_views is None else int(num_views)
   bar = tqdm(total=setup.num_steps, initial=step, disable=not config.train.progress,
              desc=f"train {setup.spec.kind}", dynamic_ncols=True)
   t0 = time.perf_counter()
   while step < end:
-    view = jnp.int32(view_for_step(setup.seed, step, len(views)))
+    view = jnp.int32(view_for_step(setup.seed, step, num_views))
     rows = setup.sobol[step * m:(step + 1) * m]
     new_state, metrics = step_fn(state, views.images, views.cameras, view, rows)
     if bool(metrics.overflow):  # nothing was updated: grow the budget and redo the step
