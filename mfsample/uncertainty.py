@@ -29,7 +29,7 @@ from jax.sharding import AxisType, Mesh, PartitionSpec
 from mfsample import samplers
 from mfsample.camera import Camera
 from mfsample.render import TileStats, render
-from mfsample.render.budget import BudgetExceededError, fit_budget
+from mfsample.render.budget import render_with_budget
 from mfsample.render.settings import RenderSettings
 
 
@@ -235,13 +235,6 @@ def score_cameras(model, cameras: Camera, z, *, settings: RenderSettings, backgr
   background = jnp.asarray(background, model.params.mean["means"].dtype)
   if num_devices is None:
     num_devices = default_num_devices(cameras.batch_shape[0])
-  while True:
-    out = _score(model, cameras, z, background, settings=settings, chunk_size=chunk_size,
-                 num_devices=num_devices, with_maps=with_maps)
-    if not bool(np.any(np.asarray(out.stats.overflow))):
-      return out, settings
-    grown = fit_budget(settings, out.stats)
-    if grown.max_intersections > max_budget:
-      raise BudgetExceededError(f"scoring needs more than max_budget={max_budget} "
-                                "intersections")
-    settings = grown
+  return render_with_budget(_score, settings, model, cameras, z, background,
+                            chunk_size=chunk_size, num_devices=num_devices,
+                            with_maps=with_maps, max_budget=max_budget, what="scoring")

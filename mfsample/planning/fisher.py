@@ -33,7 +33,7 @@ import numpy as np
 
 from mfsample.model import activate
 from mfsample.render import RenderSettings, render
-from mfsample.render.budget import BudgetExceededError, fit_budget
+from mfsample.render.budget import render_with_budget
 from mfsample.uncertainty import map_cameras
 
 # FisherRF leaves the rotations out (its default `--filter_out_grad rotation`).
@@ -197,14 +197,9 @@ def fisher_scores(model, train_cameras, candidates, key, *, settings: RenderSett
   slots = np.minimum(np.arange(max(v, pad_to or v)), v - 1)
   weights = jnp.asarray(np.arange(len(slots)) < v, background.dtype)
   train_cameras = train_cameras[slots]
-  while True:
-    out = _fisher_scores(model, train_cameras, weights, candidates, key, background, reg,
-                         settings=settings, num_probes=int(num_probes),
-                         train_probes=int(train_probes), groups=groups,
-                         num_devices=int(num_devices))
-    if not bool(out.overflow):
-      return out, settings
-    grown = fit_budget(settings, out)  # reads out.num_padded
-    if grown.max_intersections > max_budget:
-      raise BudgetExceededError(f"FisherRF scoring needs more than max_budget={max_budget}")
-    settings = grown
+  return render_with_budget(
+      _fisher_scores, settings, model, train_cameras, weights, candidates, key, background,
+      reg, num_probes=int(num_probes), train_probes=int(train_probes), groups=groups,
+      num_devices=int(num_devices), max_budget=max_budget,
+      stats_of=lambda out: out,  # FisherScores carries overflow and num_padded itself
+      what="FisherRF scoring")

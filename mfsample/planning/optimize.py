@@ -23,7 +23,7 @@ import numpy as np
 import optax
 
 from mfsample.planning import poses
-from mfsample.render.budget import BudgetExceededError, fit_budget
+from mfsample.render.budget import render_with_budget
 from mfsample.render.settings import RenderSettings
 from mfsample.uncertainty import default_num_devices, sample_gaussians, uncertainty_of_samples
 
@@ -128,19 +128,17 @@ def _per_coordinate_adam(lrs):
 
 
 def _with_budget(run, settings, max_budget):
-  while True:
-    out = run(settings)
-    *rest, num_padded, overflow = out
-    if not bool(overflow):
-      return rest, settings
-    grown = fit_budget(settings, _Padded(num_padded))
-    if grown.max_intersections > max_budget:
-      raise BudgetExceededError(f"view optimisation needs more than max_budget={max_budget}")
-    settings = grown
+  """`run(settings)` -> (*results, num_padded, overflow), grown until nothing overflows."""
+  out, settings = render_with_budget(
+      lambda *, settings: run(settings), settings, max_budget=max_budget,
+      stats_of=lambda out: _Overflow(num_padded=out[-2], overflow=out[-1]),
+      what="view optimisation")
+  return out[:-2], settings
 
 
-class _Padded(NamedTuple):
+class _Overflow(NamedTuple):
   num_padded: chex.Array
+  overflow: chex.Array
 
 
 def optimize_spherical(model, uv0, z, *, sphere: poses.SphereSpec, opt=OptimizeSettings(),

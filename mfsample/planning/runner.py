@@ -41,7 +41,7 @@ from mfsample.model import mean_gaussians
 from mfsample.planning import figures, poses, strategies, training, variance
 from mfsample.planning.pool import Pool, make_pool, stack_cameras
 from mfsample.render import render
-from mfsample.render.budget import fit_budget
+from mfsample.render.budget import render_with_budget
 
 
 class Selected(NamedTuple):
@@ -237,11 +237,8 @@ def evaluate_model(model, views: Views, *, background, settings, lpips_fn=None):
     (metrics dict, settings that sufficed).
   """
   bg = jnp.asarray(background, jnp.float32)
-  while True:
-    pred, stats = _render_views(model, views.cameras, bg, settings=settings)
-    if not bool(np.any(np.asarray(stats.overflow))):
-      break
-    settings = fit_budget(settings, stats)
+  (pred, _), settings = render_with_budget(_render_views, settings, model, views.cameras, bg,
+                                          stats_of=lambda out: out[1])
   gt = jnp.asarray(views.images, jnp.float32)
   psnr, ssim = _image_metrics(pred, gt)
   out = {"psnr": float(np.mean(psnr)), "ssim": float(np.mean(ssim)), "lpips": None}

@@ -32,7 +32,7 @@ import optax
 
 from mfsample.model import mean_gaussians
 from mfsample.render import RenderSettings, render
-from mfsample.render.budget import fit_budget, render_with_budget
+from mfsample.render.budget import render_with_budget
 from mfsample.uncertainty import map_cameras
 
 
@@ -151,9 +151,7 @@ def variance_scores(vmodel: VarianceModel, cameras, *, settings: RenderSettings,
 
   Returns (scores [B] numpy, settings that sufficed).
   """
-  while True:
-    values, stats = _variance_scores(vmodel, cameras, settings=settings,
-                                     num_devices=num_devices)
-    if not bool(np.any(np.asarray(stats.overflow))):
-      return np.asarray(values), settings
-    settings = fit_budget(settings, stats)
+  (values, _), settings = render_with_budget(
+      _variance_scores, settings, vmodel, cameras, num_devices=num_devices,
+      stats_of=lambda out: out[1], what="variance scoring")
+  return np.asarray(values), settings

@@ -38,25 +38,29 @@ def fit_budget(settings: RenderSettings, stats, *, allow_shrink=False) -> Render
 
 
 def render_with_budget(render_fn, settings: RenderSettings, *args, max_budget=1 << 26,
-                       **kwargs):
+                       stats_of=lambda out: out.stats, what="render", **kwargs):
   """Calls `render_fn(*args, settings=settings, **kwargs)` until nothing overflows.
 
   Args:
-    render_fn: a (possibly jitted, possibly vmapped) function returning something with a
-      `.stats` field of `TileStats`.
+    render_fn: a (possibly jitted, possibly vmapped) function of `settings` whose output
+      carries the overflow statistics of its renders.
     settings: the starting settings.
     max_budget: refuse (BudgetExceededError) to grow beyond this many intersections.
+    stats_of: output -> an object with `overflow` and `num_padded` (any batch shape);
+      default: the output's `.stats` (`RenderOutput`, `TileStats`).
+    what: names the work in the error message.
 
   Returns:
     (output, settings) with the settings that sufficed, to reuse on the next call.
   """
   while True:
     out = render_fn(*args, settings=settings, **kwargs)
-    if not bool(np.any(np.asarray(out.stats.overflow))):
+    stats = stats_of(out)
+    if not bool(np.any(np.asarray(stats.overflow))):
       return out, settings
-    grown = fit_budget(settings, out.stats)
+    grown = fit_budget(settings, stats)
     if grown.max_intersections > max_budget:
       raise BudgetExceededError(
-          f"render needs {int(np.max(np.asarray(out.stats.num_padded)))} intersections, "
+          f"{what} needs {int(np.max(np.asarray(stats.num_padded)))} intersections, "
           f"more than max_budget={max_budget}")
     settings = grown
