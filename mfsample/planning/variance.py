@@ -33,6 +33,7 @@ import optax
 from mfsample.model import mean_gaussians
 from mfsample.render import RenderSettings, render
 from mfsample.render.budget import render_with_budget
+from mfsample.train.evaluate import render_mean
 from mfsample.uncertainty import map_cameras
 
 
@@ -87,11 +88,6 @@ def _fit(model, images, predictions, cameras, order, beta_min, prior_log_var, pr
   return log_var, losses, jnp.any(overflow)
 
 
-@functools.partial(jax.jit, static_argnames=("settings",))
-def _render_mean(model, camera, background, *, settings):
-  return render(mean_gaussians(model), camera, background=background, settings=settings)
-
-
 def fit_variance(model, views, *, settings: RenderSettings, background, steps=60, lr=0.05,
                  prior_var=0.05, beta_min=1e-3, prior_weight=1e-3, seed=0, pad_to=None):
   """Fits the per-Gaussian log-variance of `model` on the training `views` (module doc).
@@ -118,7 +114,7 @@ def fit_variance(model, views, *, settings: RenderSettings, background, steps=60
   images = jnp.asarray(views.images, dtype)
   preds = []
   for i in range(len(views)):
-    out, settings = render_with_budget(_render_mean, settings, model, views.cameras[i],
+    out, settings = render_with_budget(render_mean, settings, model, views.cameras[i],
                                        background)
     preds.append(out.rgb)
   order = np.random.default_rng([int(seed), 11]).integers(0, len(views), int(steps))

@@ -33,7 +33,8 @@ class EvalResult(NamedTuple):
 
 
 @functools.partial(jax.jit, static_argnames=("settings",))
-def _render_mean(model, camera, background, settings):
+def render_mean(model, camera, background, *, settings):
+  """`render` of the model's mean Gaussians (jitted; settings static)."""
   return render(mean_gaussians(model), camera, background=background, settings=settings)
 
 
@@ -56,7 +57,7 @@ def evaluate(model, views, *, background, settings, lpips_fn=None, uncertainty_z
   psnrs, ssims, lpipss, images, unc = [], [], [], [], []
   for i in range(len(views)):
     camera = views.cameras[i]
-    out, settings = render_with_budget(_render_mean, settings, model, camera, bg)
+    out, settings = render_with_budget(render_mean, settings, model, camera, bg)
     pred = jnp.clip(out.rgb, 0.0, 1.0)
     gt = jnp.asarray(views.images[i], jnp.float32)
     psnrs.append(float(metrics.psnr(pred, gt)))
