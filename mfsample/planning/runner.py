@@ -210,7 +210,7 @@ class Trainer:
 
 
 @functools.partial(jax.jit, static_argnames=("settings",))
-def _render_views(model, cameras, background, *, settings):
+def render_views(model, cameras, background, *, settings):
   """[V, H, W, 3] renders of the mean model (one after another: cheap budget skipping)."""
   gaussians = mean_gaussians(model)
 
@@ -237,7 +237,7 @@ def evaluate_model(model, views: Views, *, background, settings, lpips_fn=None):
     (metrics dict, settings that sufficed).
   """
   bg = jnp.asarray(background, jnp.float32)
-  (pred, _), settings = render_with_budget(_render_views, settings, model, views.cameras, bg,
+  (pred, _), settings = render_with_budget(render_views, settings, model, views.cameras, bg,
                                           stats_of=lambda out: out[1])
   gt = jnp.asarray(views.images, jnp.float32)
   psnr, ssim = _image_metrics(pred, gt)
