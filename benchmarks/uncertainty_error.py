@@ -98,7 +98,8 @@ def run():
       model = trainer.round_model("lowrank", selected, seed)
       train_seconds.append(time.perf_counter() - t0)
       (pred, _), settings["mean"] = render_with_budget(
-          runner.render_views, settings.get("mean", RenderSettings(max_intersections=1 << 14)), model,
+          runner.render_views,
+          settings.get("mean", RenderSettings(max_intersections=1 << 14)), model,
           cands.cameras, bg, stats_of=lambda out: out[1])
       error = np.mean((np.asarray(pred) - np.asarray(cands.images)) ** 2, axis=(1, 2, 3))
       unused = np.ones(len(cands), bool)
@@ -107,7 +108,8 @@ def run():
       for m in per_m:
         z = unc.uncertainty_z(model, m, int(cfg.strategy.ours.z_seed))
         out, settings["score"] = unc.score_cameras(
-            model, small, z, settings=settings.get("score", RenderSettings(max_intersections=1 << 12)),
+            model, small, z,
+            settings=settings.get("score", RenderSettings(max_intersections=1 << 12)),
             background=bg, num_devices=1)
         u = np.asarray(out.values)[unused]
         per_m[m].append((spearmanr(u, error[unused]).correlation,
