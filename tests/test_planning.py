@@ -168,6 +168,8 @@ def test_every_strategy_returns_a_valid_camera(name, models):
     uv = poses.camera_to_uv(choice.camera, pool.sphere.center)
     lo, hi = pool.sphere.v_range
     assert lo - 1e-4 <= uv[1] <= hi + 1e-4
+    # The score is U at the chosen pose with unscaled z, comparable with the start's.
+    assert choice.score == choice.info["u_end"] > 0 and choice.info["u_start"] > 0
     dist = np.linalg.norm(np.asarray(choice.camera.center) - np.asarray(pool.sphere.center))
     assert dist == pytest.approx(pool.sphere.radius, rel=1e-4)
   else:

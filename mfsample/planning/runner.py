@@ -294,8 +294,7 @@ def plan_views(strategy, pool: Pool, config, seed, trainer: Trainer, budgets, on
     if "uv0" in choice.info:
       info = {"uv0": choice.info["uv0"].tolist(), "uv": choice.info["uv"].tolist(),
               "start_index": choice.info.get("start_index"),
-              "u_start": float(choice.info["values"][0]),
-              "u_end": float(choice.info["values"][-1])}
+              "u_start": choice.info["u_start"], "u_end": choice.info["u_end"]}
     selected.append(Selected(choice.index, choice.camera, image, choice.score,
                              time.perf_counter() - t0, info))
     if on_round is not None:
@@ -315,6 +314,40 @@ def run_record(strategy, seed, selected, metrics, seconds, pool):
       "optimisation": [s.info for s in selected],
       "metrics": {str(n): m for n, m in metrics.items()}, "seconds": float(seconds),
   }
+
+
+def selected_from_record(record, pool):
+  """The views of a run record (`run_record`) as `Selected`, to train on them again.
+
+  Candidates come from the pool; new poses (the optimising strategies) are captured again
+  by the pool's oracle. Scores, timings and extras are not restored.
+  """
+  from mfsample.camera import Camera
+
+  cands = pool.candidates
+  out = []
+  for index, w2c in zip(record["indices"], record["world_to_camera"], strict=True):
+    if index is not None:
+      out.append(Selected(int(index), cands.cameras[int(index)],
+                          np.asarray(cands.images[int(index)]), float("nan"), 0.0, {}))
+      continue
+    if pool.oracle is None:
+      raise ValueError(f"{record['strategy']} chose a new pose but the pool has no oracle.")
+    ref = cands.cameras[0]
+    camera = Camera.create(np.asarray(w2c, np.float32), ref.fx, ref.fy, ref.cx, ref.cy,
+                           ref.width, ref.height)
+    out.append(Selected(None, camera, np.asarray(pool.oracle(camera)), float("nan"), 0.0, {}))
+  return out
+
+
+def check_run_matches(config, results):
+  """Raises unless `config` describes the pool of a finished run (its `results.json`)."""
+  width, height = (int(v) for v in results["resolution"])
+  if (int(config.data.width), int(config.data.height)) != (width, height):
+    raise ValueError(f"the config's images are {config.data.width} x {config.data.height}, "
+                     f"the run's {width} x {height}: pass the config the run was made with.")
+  if int(config.data.num_candidates) != int(results["num_candidates"]):
+    raise ValueError("the config and the run differ in data.num_candidates.")
 
 
 # ------------------------------------------------------------------ aggregation

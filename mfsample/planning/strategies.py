@@ -249,10 +249,19 @@ def _optimise(inputs, uv0, cfg, opt_cfg):
       model, jnp.asarray(uv0, jnp.float32), z, sphere=opt_sphere, opt=settings,
       settings=_settings(inputs, "optimize"), background=jnp.asarray(inputs.background))
   camera = poses.spherical_camera(result.params, sphere)  # full resolution
+  # `result.values` follow the z scale of each step (U shrinks ~100x after the drop), so
+  # the start and the end are measured again with unscaled z: comparable numbers, and the
+  # choice's score is U at the chosen pose like every other strategy's.
+  ends = poses.spherical_camera(jnp.stack([result.trajectory[0], result.params]), opt_sphere)
+  u_ends, score_settings = unc.score_cameras(
+      model, ends, z, settings=_settings(inputs, "score"),
+      background=jnp.asarray(inputs.background), num_devices=1)
+  u_start, u_end = (float(v) for v in np.asarray(u_ends.values))
   info = {"trajectory": np.asarray(result.trajectory), "values": np.asarray(result.values),
           "uv": np.asarray(result.params), "uv0": np.asarray(uv0),
-          "settings": dict(inputs.settings, optimize=result.settings)}
-  return camera, float(result.values[-1]), info
+          "u_start": u_start, "u_end": u_end,
+          "settings": dict(inputs.settings, optimize=result.settings, score=score_settings)}
+  return camera, u_end, info
 
 
 def ours_sel_strategy(cfg) -> Strategy:
