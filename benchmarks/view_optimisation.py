@@ -33,7 +33,8 @@ _RESULTS = flags.DEFINE_string(
 _SEEDS = flags.DEFINE_list("seeds", [], "Seeds (default: all of the run's).")
 _SETTINGS = flags.DEFINE_list(
     "settings", ["2:3.3e-3", "8:3.3e-3", "2:5e-4", "8:5e-4"],
-    "Optimisation settings as M:lr (the config's: 2:3.3e-3).")
+    "Optimisation settings as M:lr, or M:lr:nocut to optimise with the renderer's cut-offs "
+    "off (the config's: 2:3.3e-3).")
 _OUT = flags.DEFINE_string("out", "results/view_optimisation.json", "JSON output.")
 
 
@@ -78,7 +79,12 @@ def main(argv):
   runs = [r for r in results["runs"] if r["strategy"] == "ours_opt_sel" and r["seed"] in seeds]
   if not runs:
     raise ValueError(f"{_RESULTS.value} has no ours_opt_sel run for seeds {seeds}")
-  variants = [(int(m), float(lr)) for m, lr in (s.split(":") for s in _SETTINGS.value)]
+  variants = []
+  for spec in _SETTINGS.value:
+    m, lr, *rest = spec.split(":")
+    if rest not in ([], ["nocut"]):
+      raise ValueError(f"--settings entries are M:lr or M:lr:nocut, got {spec!r}")
+    variants.append((int(m), float(lr), bool(rest)))
 
   pool = make_pool(config.data)
   trainer = Trainer(config, pool)
@@ -105,15 +111,17 @@ def main(argv):
       uv0 = poses.project_uv(jnp.asarray(run["optimisation"][k]["uv0"], jnp.float32), sphere)
       z_select = unc.uncertainty_z(model, m_select, int(s.ours.z_seed))
       ends = {}
-      for m, lr in variants:
+      for m, lr, nocut in variants:
         opt = optimize.OptimizeSettings(
             steps=int(s.optimize.steps), lr=lr, z_drop_step=int(s.optimize.z_drop_step),
             z_drop_scale=float(s.optimize.z_drop_scale))
         result = optimize.optimize_spherical(
             model, uv0, unc.uncertainty_z(model, m, int(s.ours.z_seed)), sphere=sphere,
-            opt=opt, settings=budget["opt"], background=bg)
-        budget["opt"] = result.settings
-        ends[f"M={m}, lr={lr:g}"] = result.params
+            opt=opt, settings=_no_cutoffs(budget["opt"]) if nocut else budget["opt"],
+            background=bg)
+        if not nocut:
+          budget["opt"] = result.settings
+        ends[f"M={m}, lr={lr:g}" + (", no cut-offs" if nocut else "")] = result.params
       cams = poses.spherical_camera(jnp.stack([uv0, *ends.values()]), sphere)
       scored, budget["score"] = unc.score_cameras(
           model, cams, z_select, settings=budget["score"], background=bg, num_devices=1)
