@@ -24,8 +24,10 @@ import os
 import time
 
 from absl import app, flags
+from ml_collections import config_flags
 
-_CONFIG = flags.DEFINE_string("config", "configs/camera_planning.py", "Planning config file.")
+_CONFIG = config_flags.DEFINE_config_file(
+    "config", "configs/camera_planning.py", "Planning config file.", lock_config=False)
 _STEPS = flags.DEFINE_list("steps", ["150", "400", "600"], "Round lengths (rounds.steps).")
 _SAMPLES = flags.DEFINE_list("samples", ["2", "8"], "M of U.")
 _SEEDS = flags.DEFINE_list("seeds", ["0", "1"], "Seeds (initial view, model init).")
@@ -33,30 +35,14 @@ _VIEWS = flags.DEFINE_list("views", ["1", "3", "6", "9"], "Training-view counts.
 _OUT = flags.DEFINE_string("out", "results/uncertainty_error.json", "JSON output.")
 
 
-def _load_config(path):
-  import importlib.util
-  import sys
+def _farthest_views(pool, config, seed, num_views):
+  """The farthest-point strategy's first `num_views` views from the seed's initial view."""
+  from mfsample.planning import runner, strategies
 
-  sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-  spec = importlib.util.spec_from_file_location("planning_config", path)
-  module = importlib.util.module_from_spec(spec)
-  spec.loader.exec_module(module)
-  return module.get_config()
-
-
-def _farthest_trajectory(pool, config, seed, num_views):
-  """Candidate indices of the farthest-point trajectory from the seed's initial view."""
-  import numpy as np
-
-  centres = np.asarray(pool.candidates.cameras.center, np.float64)
-  from mfsample.planning.runner import initial_index
-
-  chosen = [initial_index(config, seed, len(centres))]
-  while len(chosen) < num_views:
-    dist = np.linalg.norm(centres[:, None] - centres[chosen][None], axis=-1).min(axis=1)
-    dist[chosen] = -np.inf
-    chosen.append(int(np.argmax(dist)))
-  return chosen
+  config = config.copy_and_resolve_references()
+  config.max_views = num_views
+  return runner.plan_views(strategies.make_strategy("farthest", config), pool, config, seed,
+                           runner.Trainer(config, pool), budgets={})
 
 
 def run():
@@ -70,7 +56,7 @@ def run():
   from mfsample.render import RenderSettings
   from mfsample.render.budget import render_with_budget
 
-  config = _load_config(_CONFIG.value)
+  config = _CONFIG.value
   config.data.progress = False
   pool = make_pool(config.data)
   cands = pool.candidates
@@ -82,6 +68,7 @@ def run():
   seeds = [int(s) for s in _SEEDS.value]
   small = poses.downscale_camera(cands.cameras, int(config.strategy.ours.score_downscale))
 
+  trajectories = {seed: _farthest_views(pool, config, seed, max(counts)) for seed in seeds}
   rows = []
   for steps in (int(s) for s in _STEPS.value):
     cfg = config.copy_and_resolve_references()
@@ -91,9 +78,8 @@ def run():
     per_m = {int(m): [] for m in _SAMPLES.value}
     train_seconds = []
     for seed, n in itertools.product(seeds, counts):
-      idx = _farthest_trajectory(pool, cfg, seed, max(counts))[:n]
-      selected = [runner.Selected(i, cands.cameras[i], np.asarray(cands.images[i]),
-                                  float("nan"), 0.0, {}) for i in idx]
+      selected = trajectories[seed][:n]
+      idx = [view.index for view in selected]
       t0 = time.perf_counter()
       model = trainer.round_model("lowrank", selected, seed)
       train_seconds.append(time.perf_counter() - t0)
@@ -128,7 +114,8 @@ def run():
             f"rho(U, angle to views) {row['rho_u_angle']:.2f}, rho(error, angle) "
             f"{row['rho_error_angle']:.2f}; round training {row['round_train_seconds_median']:.1f}"
             " s", flush=True)
-  return {"config": _CONFIG.value, "scene": pool.name, "seeds": seeds, "view_counts": counts,
+  return {"config": config_flags.get_config_filename(flags.FLAGS["config"]),
+          "scene": pool.name, "seeds": seeds, "view_counts": counts,
           "cases_per_row": len(seeds) * len(counts), "rows": rows}
 
 
