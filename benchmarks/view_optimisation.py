@@ -3,10 +3,10 @@
 Ours (Opt. Sel.) starts at the candidate with the highest U and runs Adam on -U over the
 camera sphere (paper Sec. 4.4). This script replays the Ours (Opt. Sel.) runs of a finished
 planning run (its `results.json`): for every seed and round, the round model on the run's
-first k views (the protocol's `Trainer`: deterministic, the run's own model), the
-candidate the optimisation started from, and the pose that each optimisation setting in
-`--settings` (M:lr pairs; steps and the z drop from the config) reaches from there. It
-measures:
+first k views (the protocol's `Trainer`: deterministic, the run's own model, or with
+`--config.strategy.optimize.sampler` another sampler's), the candidate the optimisation
+started from, and the pose that each optimisation setting in `--settings` (below) reaches
+from there. It measures:
 
 - U with the selection's M and unscaled z (the number that chose the start) at the start
   and at the end: their ratio, and the end pose's rank among all candidates;
@@ -18,6 +18,11 @@ measures:
 
   PYTHONPATH=. python benchmarks/view_optimisation.py
   PYTHONPATH=. python benchmarks/view_optimisation.py --seeds=0 --settings=2:3.3e-3,8:5e-4
+  PYTHONPATH=. python benchmarks/view_optimisation.py --seeds=0 \
+      --config.strategy.optimize.sampler=diagonal --settings=2:3.3e-3:resample:nodrop
+
+Settings: M:lr, then optional flags: nocut (the renderer's cut-offs off), resample (fresh z
+every step), nodrop (no z drop), sN (N steps, the z drop at N / 2).
 """
 
 import json
@@ -33,8 +38,9 @@ _RESULTS = flags.DEFINE_string(
 _SEEDS = flags.DEFINE_list("seeds", [], "Seeds (default: all of the run's).")
 _SETTINGS = flags.DEFINE_list(
     "settings", ["2:3.3e-3", "8:3.3e-3", "2:5e-4", "8:5e-4"],
-    "Optimisation settings as M:lr, or M:lr:nocut to optimise with the renderer's cut-offs "
-    "off (the config's: 2:3.3e-3).")
+    "Optimisation settings as M:lr with optional flags :nocut (optimise with the renderer's "
+    "cut-offs off), :resample (fresh z every step), :nodrop (no z drop) and :sN (N steps, "
+    "the z drop at N / 2; default: the config's steps and drop); the config's: 2:3.3e-3.")
 _OUT = flags.DEFINE_string("out", "results/view_optimisation.json", "JSON output.")
 
 
@@ -81,10 +87,13 @@ def main(argv):
     raise ValueError(f"{_RESULTS.value} has no ours_opt_sel run for seeds {seeds}")
   variants = []
   for spec in _SETTINGS.value:
-    m, lr, *rest = spec.split(":")
-    if rest not in ([], ["nocut"]):
-      raise ValueError(f"--settings entries are M:lr or M:lr:nocut, got {spec!r}")
-    variants.append((int(m), float(lr), bool(rest)))
+    m, lr, *flags_ = spec.split(":")
+    steps = [int(f[1:]) for f in flags_ if f[:1] == "s" and f[1:].isdigit()]
+    if not set(flags_) <= {"nocut", "resample", "nodrop", *(f"s{n}" for n in steps)}:
+      raise ValueError(f"--settings entries are M:lr[:nocut][:resample][:nodrop][:sN], "
+                       f"got {spec!r}")
+    variants.append((int(m), float(lr), "nocut" in flags_, "resample" in flags_,
+                     "nodrop" in flags_, steps[0] if steps else None))
 
   pool = make_pool(config.data)
   trainer = Trainer(config, pool)
@@ -111,17 +120,21 @@ def main(argv):
       uv0 = poses.project_uv(jnp.asarray(run["optimisation"][k]["uv0"], jnp.float32), sphere)
       z_select = unc.uncertainty_z(model, m_select, int(s.ours.z_seed))
       ends = {}
-      for m, lr, nocut in variants:
+      for m, lr, nocut, resample, nodrop, steps in variants:
         opt = optimize.OptimizeSettings(
-            steps=int(s.optimize.steps), lr=lr, z_drop_step=int(s.optimize.z_drop_step),
-            z_drop_scale=float(s.optimize.z_drop_scale))
+            steps=steps or int(s.optimize.steps), lr=lr,
+            z_drop_step=steps // 2 if steps else int(s.optimize.z_drop_step),
+            z_drop_scale=1.0 if nodrop else float(s.optimize.z_drop_scale), resample_z=resample)
         result = optimize.optimize_spherical(
             model, uv0, unc.uncertainty_z(model, m, int(s.ours.z_seed)), sphere=sphere,
             opt=opt, settings=_no_cutoffs(budget["opt"]) if nocut else budget["opt"],
-            background=bg)
+            background=bg, key=jax.random.fold_in(jax.random.key(seed), k))
         if not nocut:
           budget["opt"] = result.settings
-        ends[f"M={m}, lr={lr:g}" + (", no cut-offs" if nocut else "")] = result.params
+        name = (f"M={m}, lr={lr:g}" + (f", {steps} steps" if steps else "")
+                + (", no cut-offs" if nocut else "")
+                + (", fresh z every step" if resample else "") + (", no z drop" if nodrop else ""))
+        ends[name] = result.params
       cams = poses.spherical_camera(jnp.stack([uv0, *ends.values()]), sphere)
       scored, budget["score"] = unc.score_cameras(
           model, cams, z_select, settings=budget["score"], background=bg, num_devices=1)
@@ -175,6 +188,7 @@ def main(argv):
           f"in {int(np.sum(fd3 < 0))} / {len(rows)}")
   with open(_OUT.value, "w") as f:
     json.dump({"results": _RESULTS.value, "seeds": seeds, "select_samples": m_select,
+               "round_model": model_kind,
                "summary": summary, "rows": rows}, f, indent=1)
   print(f"wrote {_OUT.value}")
 

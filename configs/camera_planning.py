@@ -115,6 +115,13 @@ def get_config():
   opt.z_drop_step = 30
   opt.z_drop_scale = 0.1
   opt.downscale = 2  # The optimisation renders at 1/2 of the image size (speed).
+  # False: the same M Sobol z at every step (METHOD.md). True: M fresh uniform z per step,
+  # stochastic gradients of the expected U (`optimize.OptimizeSettings.resample_z`).
+  opt.resample_z = False
+  # The round model of the optimising variants: "" = the rounds' sampler (lowrank, the
+  # paper's). The authors' published optimisation command trains rank 0, i.e. "diagonal",
+  # with fresh z every step. Neither lifts Opt. Sel. here (README, view optimisation).
+  opt.sampler = ""
   s.fisher = fisher = ml_collections.ConfigDict()
   fisher.probes = 1  # Rademacher probes (backward passes) per candidate.
   fisher.train_probes = 8  # Probes per training view (H_train is in a denominator).

@@ -1,5 +1,7 @@
 """Camera parameterisations, the strategies, the optimiser, and the protocol end to end."""
 
+import dataclasses
+import functools
 import json
 import math
 import os
@@ -213,6 +215,26 @@ def test_optimisation_increases_uncertainty_and_respects_the_band(models):
                               opt=optimize.OptimizeSettings(steps=3, z_drop_step=2),
                               settings=out.settings)
   assert np.all(np.isfinite(np.asarray(se3.params))) and np.any(np.asarray(se3.params) != 0)
+
+
+def test_resampled_optimisation_draws_fresh_z_from_its_key(models):
+  pool = tiny_pool()
+  model = models["stochastic"]
+  sphere = pool.sphere.replace(width=8, height=8)
+  z = unc.uncertainty_z(model, 2, seed=6174)
+  opt = optimize.OptimizeSettings(steps=3, lr=1e-2, z_drop_step=3, resample_z=True)
+  uv0 = poses.camera_to_uv(pool.candidates.cameras[4])
+  with pytest.raises(ValueError, match="PRNG key"):
+    optimize.optimize_spherical(model, uv0, z, sphere=sphere, opt=opt)
+  run = functools.partial(optimize.optimize_spherical, model, uv0, z, sphere=sphere, opt=opt)
+  a, b, c = run(key=jax.random.PRNGKey(0)), run(key=jax.random.PRNGKey(0)), run(
+      key=jax.random.PRNGKey(1))
+  np.testing.assert_array_equal(a.values, b.values)  # reproducible from the key
+  assert np.all(np.isfinite(a.values)) and np.all(np.isfinite(c.values))
+  assert a.values[0] != c.values[0]  # other z at the same start pose
+  fixed = optimize.optimize_spherical(model, uv0, z, sphere=sphere,
+                                      opt=dataclasses.replace(opt, resample_z=False))
+  assert fixed.values[0] not in (a.values[0], c.values[0])
 
 
 # ------------------------------------------------------------------ the protocol

@@ -7,6 +7,12 @@ variance), u wrapped and v clamped after every step. `optimize_spherical` runs e
 with every number an `OptimizeSettings` field; `optimize_se3` runs the same loop on a free
 6-DoF pose updated in the tangent space (`poses.perturb_camera`).
 
+With `resample_z` every step draws M fresh z (uniform on [-1, 1], from a PRNG key) instead
+of reusing the same M: Adam then follows stochastic gradients of the expected U, the
+quantity that Eq. 10 estimates, rather than exact gradients of one fixed M-sample
+estimate. The authors' published optimisation command (`--rank 0`, a diagonal sampler)
+draws fresh uniforms every step in this way.
+
 The whole trajectory is one `lax.scan` (a single compilation, no host round trip per step);
 if any render overflowed its intersection budget the run is repeated with a larger budget, so
 no step ever follows the gradient of a truncated image.
@@ -37,6 +43,7 @@ class OptimizeSettings:
     lr: Adam learning rate on (u, v) (authors: 5e-4).
     z_drop_step: from this step on z is multiplied by `z_drop_scale` (authors: 200).
     z_drop_scale: (authors: 0.1).
+    resample_z: draw fresh z every step (shaped like the given z) instead of reusing it.
     se3_lr_rotation: Adam learning rate of the rotation part of a 6-DoF tangent vector
       (radians per step, roughly).
     se3_lr_translation: the same for the translation part (world units per step).
@@ -46,6 +53,7 @@ class OptimizeSettings:
   lr: float = 5e-4
   z_drop_step: int = 200
   z_drop_scale: float = 0.1
+  resample_z: bool = False
   se3_lr_rotation: float = 2e-3
   se3_lr_translation: float = 5e-3
 
@@ -73,44 +81,49 @@ def _z_scales(opt: OptimizeSettings, dtype):
   return jnp.asarray(np.where(steps >= opt.z_drop_step, opt.z_drop_scale, 1.0), dtype)
 
 
-def _run(model, params0, z, background, camera_fn, project, optimizer, opt, settings,
+def _run(model, params0, z, key, background, camera_fn, project, optimizer, opt, settings,
          num_devices):
   """The scanned Adam loop on -U(camera_fn(params)); the M samples split over devices."""
 
-  def neg_u(params, z_scale):
-    g = sample_gaussians(model, z * z_scale)
+  def neg_u(params, z_step):
+    g = sample_gaussians(model, z_step)
     u = uncertainty_of_samples(g, camera_fn(params), settings=settings, background=background,
                                num_devices=num_devices)
     return -u.value, u.stats
 
-  def step(carry, z_scale):
+  def step(carry, xs):
     params, state = carry
-    (loss, stats), grad = jax.value_and_grad(neg_u, has_aux=True)(params, z_scale)
+    index, z_scale = xs
+    if opt.resample_z:
+      z_step = jax.random.uniform(jax.random.fold_in(key, index), z.shape, z.dtype, -1.0, 1.0)
+    else:
+      z_step = z
+    (loss, stats), grad = jax.value_and_grad(neg_u, has_aux=True)(params, z_step * z_scale)
     updates, state = optimizer.update(grad, state, params)
     new = project(optax.apply_updates(params, updates))
     return (new, state), (-loss, params, jnp.max(stats.num_padded), jnp.any(stats.overflow))
 
   init = (params0, optimizer.init(params0))
   (params, _), (values, traj, num_padded, overflow) = jax.lax.scan(
-      step, init, _z_scales(opt, z.dtype))
+      step, init, (jnp.arange(opt.steps), _z_scales(opt, z.dtype)))
   trajectory = jnp.concatenate([traj, params[None]], axis=0)
   return params, values, trajectory, jnp.max(num_padded), jnp.any(overflow)
 
 
 @functools.partial(jax.jit, static_argnames=("sphere", "opt", "settings", "num_devices"))
-def _spherical(model, uv0, z, background, *, sphere, opt, settings, num_devices):
+def _spherical(model, uv0, z, key, background, *, sphere, opt, settings, num_devices):
   optimizer = optax.adam(opt.lr)
-  return _run(model, uv0, z, background, lambda uv: poses.spherical_camera(uv, sphere),
+  return _run(model, uv0, z, key, background, lambda uv: poses.spherical_camera(uv, sphere),
               lambda uv: poses.project_uv(uv, sphere), optimizer, opt, settings, num_devices)
 
 
 @functools.partial(jax.jit, static_argnames=("opt", "settings", "num_devices"))
-def _se3(model, camera0, z, background, *, opt, settings, num_devices):
+def _se3(model, camera0, z, key, background, *, opt, settings, num_devices):
   # Rotation and translation differ in units: one learning rate each.
   lrs = jnp.asarray([opt.se3_lr_rotation] * 3 + [opt.se3_lr_translation] * 3, z.dtype)
   optimizer = _per_coordinate_adam(lrs)
   xi0 = jnp.zeros((6,), z.dtype)
-  return _run(model, xi0, z, background, lambda xi: poses.perturb_camera(camera0, xi),
+  return _run(model, xi0, z, key, background, lambda xi: poses.perturb_camera(camera0, xi),
               lambda xi: xi, optimizer, opt, settings, num_devices)
 
 
@@ -136,6 +149,14 @@ def _with_budget(run, settings, max_budget):
   return out[:-2], settings
 
 
+def _key(opt: OptimizeSettings, key):
+  if key is not None:
+    return key
+  if opt.resample_z:
+    raise ValueError("OptimizeSettings.resample_z needs a PRNG key")
+  return jax.random.PRNGKey(0)  # unused
+
+
 class _Overflow(NamedTuple):
   num_padded: chex.Array
   overflow: chex.Array
@@ -143,13 +164,14 @@ class _Overflow(NamedTuple):
 
 def optimize_spherical(model, uv0, z, *, sphere: poses.SphereSpec, opt=OptimizeSettings(),
                        settings: RenderSettings = RenderSettings(), background=None,
-                       num_devices=None, max_budget=1 << 24) -> OptimizeResult:
+                       num_devices=None, max_budget=1 << 24, key=None) -> OptimizeResult:
   """Maximises U over the camera sphere from (u, v) = `uv0` (Ours (Opt. Sel. / Rnd.)).
 
   Args:
     model: stochastic `mfsample.model.Model`.
     uv0: [2] starting (u, v) (projected onto the valid band first).
-    z: [M, *z_shape] samples (`mfsample.uncertainty.uncertainty_z`; paper M = 2).
+    z: [M, *z_shape] samples (`mfsample.uncertainty.uncertainty_z`; paper M = 2); with
+      `opt.resample_z` only its shape is used.
     sphere: `poses.SphereSpec` (static; its image size is the optimisation's resolution).
     opt: `OptimizeSettings`.
     settings: starting `RenderSettings` (grown on overflow).
@@ -157,6 +179,7 @@ def optimize_spherical(model, uv0, z, *, sphere: poses.SphereSpec, opt=OptimizeS
     num_devices: devices to split the M samples over (default: as many as there are samples
       and devices).
     max_budget: refuse to grow the render budget beyond this.
+    key: PRNG key of the fresh z (required with `opt.resample_z`, ignored otherwise).
 
   Returns:
     `OptimizeResult`.
@@ -166,14 +189,14 @@ def optimize_spherical(model, uv0, z, *, sphere: poses.SphereSpec, opt=OptimizeS
   uv0 = poses.project_uv(jnp.asarray(uv0, dtype), sphere)
   n = default_num_devices(z.shape[0]) if num_devices is None else int(num_devices)
   (params, values, traj), settings = _with_budget(
-      lambda s: _spherical(model, uv0, z, background, sphere=sphere, opt=opt, settings=s,
-                           num_devices=n), settings, max_budget)
+      lambda s: _spherical(model, uv0, z, _key(opt, key), background, sphere=sphere, opt=opt,
+                           settings=s, num_devices=n), settings, max_budget)
   return OptimizeResult(poses.spherical_camera(params, sphere), params, values, traj, settings)
 
 
 def optimize_se3(model, camera0, z, *, opt=OptimizeSettings(),
                  settings: RenderSettings = RenderSettings(), background=None,
-                 num_devices=None, max_budget=1 << 24) -> OptimizeResult:
+                 num_devices=None, max_budget=1 << 24, key=None) -> OptimizeResult:
   """Maximises U over free 6-DoF poses near `camera0` (tangent-space Adam on xi).
 
   Unlike the spherical parameterisation nothing keeps the camera pointed at the scene or at
@@ -186,6 +209,6 @@ def optimize_se3(model, camera0, z, *, opt=OptimizeSettings(),
   background = jnp.zeros((3,), dtype) if background is None else jnp.asarray(background, dtype)
   n = default_num_devices(z.shape[0]) if num_devices is None else int(num_devices)
   (params, values, traj), settings = _with_budget(
-      lambda s: _se3(model, camera0, z, background, opt=opt, settings=s, num_devices=n),
-      settings, max_budget)
+      lambda s: _se3(model, camera0, z, _key(opt, key), background, opt=opt, settings=s,
+                     num_devices=n), settings, max_budget)
   return OptimizeResult(poses.perturb_camera(camera0, params), params, values, traj, settings)

@@ -95,6 +95,8 @@ def as_views(selected, downscale=1) -> Views:
 def round_config(config, kind):
   """The training config of the rounds for a model kind (a copy).
 
+  "stochastic" keeps the config's sampler; "lowrank", "diagonal" or "block" replace it.
+
   Re-initialised rounds (the authors' code) train `rounds.steps` steps each. With
   `rounds.warm_start` (the paper's text: one run, a camera added every so many steps) the
   schedules span the whole run: `rounds.first_steps` + (max_views - 2) * `rounds.steps`.
@@ -104,6 +106,8 @@ def round_config(config, kind):
   with cfg.unlocked():
     if kind in ("deterministic", "variance"):
       cfg.sampler.kind = "deterministic"
+    elif kind in ("lowrank", "diagonal", "block"):  # a strategy that names its sampler
+      cfg.sampler.kind = kind
     if r.warm_start:
       cfg.train.num_steps = int(r.first_steps) + (int(config.max_views) - 2) * int(r.steps)
     else:

@@ -1,8 +1,9 @@
 """Next-view strategies behind one interface: (model, training cameras, candidates) -> camera.
 
-A `Strategy` names the model it needs (`model_kind`: None, "stochastic", "deterministic" or
-"variance"), whether it may propose poses outside the candidate pool (`new_poses`: such a
-pose must then be captured by an oracle), and a pure `select(inputs, key) -> Choice`.
+A `Strategy` names the model it needs (`model_kind`: None, "stochastic" (the rounds'
+sampler), a sampler kind ("lowrank", "diagonal", "block"), "deterministic" or "variance"),
+whether it may propose poses outside the candidate pool (`new_poses`: such a pose must then
+be captured by an oracle), and a pure `select(inputs, key) -> Choice`.
 
 | name          | paper row         | how the next view is chosen                              |
 | ------------- | ----------------- | -------------------------------------------------------- |
@@ -235,7 +236,7 @@ def _ours_scores(inputs, cfg):
   return np.asarray(out.values), settings
 
 
-def _optimise(inputs, uv0, cfg, opt_cfg):
+def _optimise(inputs, uv0, cfg, opt_cfg, key):
   model = inputs.model
   z = unc.uncertainty_z(model, int(opt_cfg.samples), int(cfg.z_seed))
   down = int(opt_cfg.downscale)
@@ -244,10 +245,12 @@ def _optimise(inputs, uv0, cfg, opt_cfg):
                               height=max(sphere.height // down, 1))
   settings = optimize.OptimizeSettings(
       steps=int(opt_cfg.steps), lr=float(opt_cfg.lr), z_drop_step=int(opt_cfg.z_drop_step),
-      z_drop_scale=float(opt_cfg.z_drop_scale))
+      z_drop_scale=float(opt_cfg.z_drop_scale),
+      resample_z=bool(opt_cfg.get("resample_z", False)))
   result = optimize.optimize_spherical(
       model, jnp.asarray(uv0, jnp.float32), z, sphere=opt_sphere, opt=settings,
-      settings=_settings(inputs, "optimize"), background=jnp.asarray(inputs.background))
+      settings=_settings(inputs, "optimize"), background=jnp.asarray(inputs.background),
+      key=key)
   camera = poses.spherical_camera(result.params, sphere)  # full resolution
   # `result.values` follow the z scale of each step (U shrinks ~100x after the drop), so
   # the start and the end are measured again with unscaled z: comparable numbers, and the
@@ -278,33 +281,38 @@ def ours_sel_strategy(cfg) -> Strategy:
   return Strategy("ours_sel", "stochastic", False, select)
 
 
+def _opt_model_kind(opt_cfg):
+  return opt_cfg.get("sampler", "") or "stochastic"
+
+
 def ours_opt_sel_strategy(cfg, opt_cfg) -> Strategy:
   """Ours (Opt. Sel.): Adam on -U over the camera sphere from the Ours (Sel.) choice.
 
-  opt_cfg fields: samples (M), steps, lr, z_drop_step, z_drop_scale, downscale (the
-  optimisation renders at 1/downscale of the image size).
+  opt_cfg fields: samples (M), steps, lr, z_drop_step, z_drop_scale, resample_z (fresh z
+  every step), downscale (the optimisation renders at 1/downscale of the image size),
+  sampler (the round model's sampler; "": the rounds' own).
   """
   def select(inputs, key):
-    del key
     scores, settings = _ours_scores(inputs, cfg)
     start = _pick(inputs, scores, settings={"score": settings})
     uv0 = poses.camera_to_uv(start.camera, inputs.sphere.center)
     camera, value, info = _optimise(inputs._replace(settings=start.info["settings"]), uv0,
-                                    cfg, opt_cfg)
+                                    cfg, opt_cfg, key)
     info.update(start_index=start.index, start_score=start.score, scores=scores)
     return Choice(None, camera, value, info)
 
-  return Strategy("ours_opt_sel", "stochastic", True, select)
+  return Strategy("ours_opt_sel", _opt_model_kind(opt_cfg), True, select)
 
 
 def ours_opt_rnd_strategy(cfg, opt_cfg) -> Strategy:
   """Ours (Opt. Rnd.): Adam on -U over the camera sphere from a random pose."""
   def select(inputs, key):
     uv0 = poses.random_uv(_rng(key), 1, inputs.sphere)[0]
-    camera, value, info = _optimise(inputs, uv0, cfg, opt_cfg)
+    # Fresh z (resample_z) from a key derived from the start's: the start is unchanged.
+    camera, value, info = _optimise(inputs, uv0, cfg, opt_cfg, jax.random.fold_in(key, 1))
     return Choice(None, camera, value, info)
 
-  return Strategy("ours_opt_rnd", "stochastic", True, select)
+  return Strategy("ours_opt_rnd", _opt_model_kind(opt_cfg), True, select)
 
 
 def make_strategy(name, config) -> Strategy:
