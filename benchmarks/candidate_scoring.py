@@ -10,7 +10,6 @@ per-candidate times is reported (median over repeats, after compilation).
   PYTHONPATH=. python benchmarks/candidate_scoring.py --resolution=100 --num_gaussians=5000
 """
 
-import json
 import os
 import platform
 import statistics
@@ -102,10 +101,8 @@ def run():
 
 def main(argv):
   del argv
-  result = run()
-  os.makedirs(os.path.dirname(_OUT.value) or ".", exist_ok=True)
-  with open(_OUT.value, "w") as f:
-    json.dump(result, f, indent=2)
+  from mfsample._json import write_json
+  write_json(_OUT.value, run())
   print(f"wrote {_OUT.value}")
 
 

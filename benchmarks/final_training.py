@@ -115,8 +115,8 @@ def main(argv):
          "summary": summary, "rows": rows, "seconds_per_model": {
              str(s): float(np.mean([r["seconds"] for r in rows if r["steps"] == int(s)]))
              for s in _STEPS.value}}
-  with open(_OUT.value, "w") as f:
-    json.dump(out, f, indent=1)
+  from mfsample._json import write_json
+  write_json(_OUT.value, out, indent=1)
   print(f"wrote {_OUT.value}")
 
 

@@ -169,9 +169,8 @@ def main(argv):
       f = summary[key]
       print(f"{key}: time = {f['intercept_ms']:.1f} ms + {f['ms_per_1k_intersections']:.2f} ms"
             f" per 1k intersections (R^2 = {f['r2']:.3f})")
-  os.makedirs(os.path.dirname(_OUT.value) or ".", exist_ok=True)
-  with open(_OUT.value, "w") as fh:
-    json.dump(summary, fh, indent=2)
+  from mfsample._json import write_json
+  write_json(_OUT.value, summary)
   print(f"saved {_OUT.value}")
   if len(rows) >= 3:
     _plot(summary, os.path.splitext(_OUT.value)[0] + ".png")

@@ -280,9 +280,8 @@ def main(argv):
              "rank": rank_from_train_step(),
              }
   results["seconds"] = time.time() - started
-  os.makedirs(os.path.dirname(_OUT.value) or ".", exist_ok=True)
-  with open(_OUT.value, "w") as f:
-    json.dump(results, f, indent=2)
+  from mfsample._json import write_json
+  write_json(_OUT.value, results)
   print(f"saved {_OUT.value}")
   if _PLOT.value:
     _plot(results, _PLOT.value)

@@ -75,11 +75,10 @@ def main(argv):
     lp = float("nan") if r["lpips"] is None else r["lpips"]
     print(f"{name:>14} | {r['psnr']:6.2f} | {r['ssim']:6.4f} | {lp:6.4f} | {r['steps']:5d} | "
           f"{r['live_gaussians']:9d} | {r['train_seconds'] / 60:9.1f}")
-  os.makedirs(os.path.dirname(_OUT.value) or ".", exist_ok=True)
-  with open(_OUT.value, "w") as f:
-    json.dump({"variants": rows, "wall_seconds_this_call": time.time() - started,
-               "size": _SIZE.value, "steps": _STEPS.value, "parallel": _PARALLEL.value,
-               "extra": _EXTRA.value}, f, indent=2)
+  from mfsample._json import write_json
+  write_json(_OUT.value, {"variants": rows, "wall_seconds_this_call": time.time() - started,
+                          "size": _SIZE.value, "steps": _STEPS.value,
+                          "parallel": _PARALLEL.value, "extra": _EXTRA.value})
   print(f"saved {_OUT.value}")
 
 

@@ -204,13 +204,13 @@ def main(argv):
   for variant, row in table.items():
     print(f"{variant:>13} | {row['ms_per_step']:8.1f} | {row.get('ratio', float('nan')):6.3f} | "
           f"{row['peak_rss_mb']:11.0f} | {row['params_per_gaussian']}")
-  os.makedirs(os.path.dirname(_OUT.value) or ".", exist_ok=True)
   first = rounds[0][_VARIANTS.value[0]]
-  with open(_OUT.value, "w") as f:
-    json.dump({"table": table, "rounds": rounds, "resolution": first["resolution"],
-               "from_checkpoints": _FROM.value, "live_gaussians": first["live"],
-               "points": _POINTS.value, "samples": _SAMPLES.value, "steps": _STEPS.value,
-               "cpu_count": os.cpu_count(), "load_end": _load()}, f, indent=2)
+  from mfsample._json import write_json
+  write_json(_OUT.value, {"table": table, "rounds": rounds, "resolution": first["resolution"],
+                          "from_checkpoints": _FROM.value, "live_gaussians": first["live"],
+                          "points": _POINTS.value, "samples": _SAMPLES.value,
+                          "steps": _STEPS.value, "cpu_count": os.cpu_count(),
+                          "load_end": _load()})
   print(f"saved {_OUT.value}")
 
 

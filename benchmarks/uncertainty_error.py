@@ -19,8 +19,6 @@ default scene) for the round models that the protocol trains:
 """
 
 import itertools
-import json
-import os
 import time
 
 from absl import app, flags
@@ -121,10 +119,8 @@ def run():
 
 def main(argv):
   del argv
-  result = run()
-  os.makedirs(os.path.dirname(_OUT.value) or ".", exist_ok=True)
-  with open(_OUT.value, "w") as f:
-    json.dump(result, f, indent=2)
+  from mfsample._json import write_json
+  write_json(_OUT.value, run())
   print(f"wrote {_OUT.value}")
 
 

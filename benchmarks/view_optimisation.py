@@ -186,10 +186,10 @@ def main(argv):
     print(f"  {probe}: median {np.median(fd4 / ad):.2f} (h = 1e-4), "
           f"{np.median(fd3 / ad):.2f} (h = 1e-3); the h = 1e-3 difference points downhill "
           f"in {int(np.sum(fd3 < 0))} / {len(rows)}")
-  with open(_OUT.value, "w") as f:
-    json.dump({"results": _RESULTS.value, "seeds": seeds, "select_samples": m_select,
-               "round_model": model_kind,
-               "summary": summary, "rows": rows}, f, indent=1)
+  from mfsample._json import write_json
+  write_json(_OUT.value, {"results": _RESULTS.value, "seeds": seeds,
+                          "select_samples": m_select, "round_model": model_kind,
+                          "summary": summary, "rows": rows}, indent=1)
   print(f"wrote {_OUT.value}")
 
 

@@ -35,6 +35,7 @@ import numpy as np
 
 from mfsample import metrics as metrics_lib
 from mfsample import uncertainty as unc
+from mfsample._json import write_json
 from mfsample.data._io import area_downscale
 from mfsample.data.views import Views
 from mfsample.model import mean_gaussians
@@ -400,13 +401,6 @@ def table_markdown(summary, eval_views, order=strategies.NAMES, title=None):
   return "\n".join(lines) + "\n"
 
 
-def _write_json(path, obj):
-  tmp = f"{path}.tmp"
-  with open(tmp, "w") as f:
-    json.dump(obj, f, indent=1)
-  os.replace(tmp, path)
-
-
 # ------------------------------------------------------------------ the loop
 
 
@@ -497,7 +491,7 @@ def run_camera_planning(config, workdir):
           settings=budgets.get("eval") or trainer.settings.get("final"))
       bar.update(1)
     record = run_record(strategy, seed, selected, metrics, time.perf_counter() - t_run, pool)
-    _write_json(path, record)
+    write_json(path, record, indent=1)
     records.append(record)
   bar.close()
 
@@ -528,7 +522,7 @@ def run_camera_planning(config, workdir):
       "seconds": {"total_this_call": time.perf_counter() - t_start, "pool": pool_seconds,
                   "figures": fig_seconds},
   }
-  _write_json(os.path.join(workdir, "results.json"), results)
+  write_json(os.path.join(workdir, "results.json"), results, indent=1)
   return results
 
 

@@ -7,7 +7,6 @@ events of 3DGS (densification, opacity reset) and checkpoints between steps.
 """
 
 import dataclasses
-import json
 import os
 import time
 from typing import NamedTuple
@@ -16,6 +15,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from mfsample._json import write_json
 from mfsample.model import GROUPS, SamplerSpec, group_shapes, init_model
 from mfsample.render.budget import BudgetExceededError, fit_budget
 from mfsample.render.settings import RenderSettings
@@ -294,7 +294,7 @@ def train_and_evaluate(config, workdir):
   result = train(config, dataset.train, bounds=dataset.bounds,
                  checkpoint_dir=os.path.join(workdir, "checkpoints"))
   state, setup = result.state, result.setup
-  _write_json(os.path.join(workdir, "train_log.json"), result.history)
+  write_json(os.path.join(workdir, "train_log.json"), result.history)
 
   lpips_fn = metrics.make_lpips(config.eval.lpips_net) if config.eval.lpips_net else None
   model = state.model
@@ -323,12 +323,5 @@ def train_and_evaluate(config, workdir):
       "resolution": [int(dataset.train.images.shape[2]), int(dataset.train.images.shape[1])],
       "num_train_views": len(dataset.train), "per_view": ev.per_view,
   })
-  _write_json(os.path.join(workdir, "metrics.json"), summary)
+  write_json(os.path.join(workdir, "metrics.json"), summary)
   return state
-
-
-def _write_json(path, obj):
-  tmp = path + ".tmp"
-  with open(tmp, "w") as f:
-    json.dump(obj, f, indent=2)
-  os.replace(tmp, path)
