@@ -58,6 +58,8 @@ def get_config():
   config.eval_views = (5, 10)  # Evaluate after this many views (paper: 5 and 10).
   config.max_views = 10  # Views at the end of a run (the largest of eval_views).
   config.progress = True  # tqdm progress bar.
+  # table.md also lists every strategy's per-seed PSNR difference to these (paired by seed).
+  config.paired_references = ("farthest", "fisher")
 
   # ----------------------------------------------------------------- data
   config.data = data = ml_collections.ConfigDict()

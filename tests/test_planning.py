@@ -280,6 +280,29 @@ def test_table_layout_has_mean_and_std():
   assert "| Ours (Sel.) | 20.50 ± 0.50 | 0.800 ± 0.000 | 0.100 ± 0.000 |" in table
 
 
+def test_paired_differences_are_per_seed_and_count_wins():
+  def rec(strategy, seed, psnr, lpips):
+    return {"strategy": strategy, "label": strategy.title(), "seed": seed,
+            "metrics": {"10": {"psnr": psnr, "ssim": 0.8, "lpips": lpips}}}
+
+  # A large shared seed effect (+5 dB per seed) hides a consistent +0.1 dB in mean ± std.
+  records = [rec("farthest", s, 20.0 + 5 * s, 0.2) for s in range(3)]
+  records += [rec("ours_sel", s, 20.1 + 5 * s, 0.3 - 0.15 * s) for s in range(3)]
+  records.append(rec("ours_sel", 7, 30.0, 0.1))  # No farthest run with seed 7: not paired.
+  paired = runner.paired_differences(records, (10,), "farthest")
+  e = paired["ours_sel"]["10"]
+  assert e["seeds"] == [0, 1, 2] and e["wins"] == 3
+  assert e["mean"] == pytest.approx(0.1) and e["sem"] == pytest.approx(0.0, abs=1e-9)
+  assert "farthest" not in paired
+  lp = runner.paired_differences(records, (10,), "farthest", metric="lpips")["ours_sel"]["10"]
+  assert lp["values"] == pytest.approx([0.1, -0.05, -0.2]) and lp["wins"] == 2  # lower wins
+  labels = {"farthest": "Farthest", "ours_sel": "Ours (Sel.)"}
+  table = runner.paired_markdown(paired, labels, "Farthest", (10,))
+  assert "| Ours (Sel.) | +0.10 ± 0.00 (better in 3/3) |" in table
+  one = runner.paired_differences(records[:1] + records[3:4], (10,), "farthest")
+  assert one["ours_sel"]["10"]["sem"] is None
+
+
 def test_batched_evaluation_matches_the_training_module(models):
   from mfsample.train.evaluate import evaluate
 
