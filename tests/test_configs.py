@@ -1,11 +1,17 @@
-"""The training configs load, every field is documented, and command-line overrides work."""
+"""The configs load, every training field is documented, command-line overrides work, and
+the planning configs that share a workdir differ only where the runner allows."""
 
+import importlib
+import json
 import pathlib
 import re
 
 import pytest
 from absl import flags
 from ml_collections import config_flags
+
+from mfsample.planning import runner
+from mfsample.planning.strategies import NAMES
 
 CONFIGS = ["configs/train_default.py", "configs/train_lego.py", "configs/train_synthetic.py"]
 ROOT = pathlib.Path(__file__).resolve().parents[1]
@@ -33,3 +39,36 @@ def test_every_default_field_has_a_comment():
   for i, line in enumerate(lines):
     if re.match(r"\s+\w+(\.\w+)+ = ", line):
       assert "#" in line or lines[i - 1].strip().startswith("#"), line
+
+
+PLANNING_CONFIGS = sorted(p.name for p in (ROOT / "configs").glob("camera_planning*.py"))
+# Configs the README runs in the workdir of another: they may differ only in the fields
+# that `runner` lets change between calls (seeds, strategies, presentation).
+SHARED_WORKDIRS = {"camera_planning_results.py": "camera_planning.py",
+                   "camera_planning_seeds8.py": "camera_planning.py",
+                   "camera_planning_lego_seeds8.py": "camera_planning_lego.py"}
+
+
+def _planning_config(name):
+  return importlib.import_module(f"configs.{name[:-3]}").get_config()
+
+
+@pytest.mark.parametrize("name", PLANNING_CONFIGS)
+def test_planning_config_names_real_strategies(name):
+  config = _planning_config(name)
+  assert set(config.strategies) <= set(NAMES)
+  assert set(config.paired_references) <= set(NAMES)
+  assert max(config.eval_views) <= config.max_views and len(config.seeds) >= 1
+
+
+def _comparable(name):
+  return runner._comparable_config(json.loads(_planning_config(name).to_json_best_effort()))
+
+
+@pytest.mark.parametrize("name,base", sorted(SHARED_WORKDIRS.items()))
+def test_configs_sharing_a_workdir_differ_only_in_resumable_fields(name, base):
+  assert _comparable(name) == _comparable(base)
+
+
+def test_a_different_protocol_needs_its_own_workdir():
+  assert _comparable("camera_planning_scale.py") != _comparable("camera_planning.py")
