@@ -359,6 +359,7 @@ def check_run_matches(config, results):
 
 
 METRICS = (("psnr", "PSNR", "↑"), ("ssim", "SSIM", "↑"), ("lpips", "LPIPS", "↓"))
+_DIGITS = {"psnr": 2, "ssim": 3, "lpips": 3}  # Decimals of each metric in the tables.
 
 
 def summarise(records, eval_views):
@@ -388,14 +389,13 @@ def table_markdown(summary, eval_views, order=strategies.NAMES, title=None):
                        for _, label, arrow in METRICS]
   lines = [] if title is None else [title, ""]
   lines += ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-  digits = {"psnr": 2, "ssim": 3, "lpips": 3}
   for name in [n for n in order if n in summary] + [n for n in summary if n not in order]:
     s = summary[name]
     row = [s["label"]]
     for n in eval_views:
       for metric, _, _ in METRICS:
         e = s.get(str(n), {}).get(metric)
-        d = digits[metric]
+        d = _DIGITS[metric]
         row.append("-" if e is None else f"{e['mean']:.{d}f} ± {e['std']:.{d}f}")
     lines.append("| " + " | ".join(row) + " |")
   return "\n".join(lines) + "\n"
@@ -441,7 +441,7 @@ def paired_markdown(paired, labels, reference_label, eval_views, metric="psnr",
   label = dict((m, lab) for m, lab, _ in METRICS)[metric]
   head = ["Method"] + [f"Δ{label} vs {reference_label} ({n} views)" for n in eval_views]
   lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-  digits = {"psnr": 2, "ssim": 3, "lpips": 3}[metric]
+  digits = _DIGITS[metric]
   for name in [n for n in order if n in paired] + [n for n in paired if n not in order]:
     row = [labels[name]]
     for n in eval_views:
@@ -556,7 +556,7 @@ def run_camera_planning(config, workdir):
   table = table_markdown(summary, eval_views, title=title)
   labels = {rec["strategy"]: rec["label"] for rec in records}
   paired = {}
-  for reference in config.get("paired_references", ()):
+  for reference in config.paired_references:
     if reference not in labels or len(config.seeds) < 2:
       continue
     paired[reference] = paired_differences(records, eval_views, reference)

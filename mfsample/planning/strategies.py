@@ -246,7 +246,7 @@ def _optimise(inputs, uv0, cfg, opt_cfg, key):
   settings = optimize.OptimizeSettings(
       steps=int(opt_cfg.steps), lr=float(opt_cfg.lr), z_drop_step=int(opt_cfg.z_drop_step),
       z_drop_scale=float(opt_cfg.z_drop_scale),
-      resample_z=bool(opt_cfg.get("resample_z", False)))
+      resample_z=bool(opt_cfg.resample_z))
   result = optimize.optimize_spherical(
       model, jnp.asarray(uv0, jnp.float32), z, sphere=opt_sphere, opt=settings,
       settings=_settings(inputs, "optimize"), background=jnp.asarray(inputs.background),
@@ -282,7 +282,7 @@ def ours_sel_strategy(cfg) -> Strategy:
 
 
 def _opt_model_kind(opt_cfg):
-  return opt_cfg.get("sampler", "") or "stochastic"
+  return opt_cfg.sampler or "stochastic"
 
 
 def ours_opt_sel_strategy(cfg, opt_cfg) -> Strategy:
