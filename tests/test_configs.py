@@ -72,3 +72,18 @@ def test_configs_sharing_a_workdir_differ_only_in_resumable_fields(name, base):
 
 def test_a_different_protocol_needs_its_own_workdir():
   assert _comparable("camera_planning_scale.py") != _comparable("camera_planning.py")
+
+
+# Committed planning results and the config the README names for each: rerunning the
+# README's command must redo the same protocol (the resume guard would refuse otherwise).
+COMMITTED_RESULTS = {"camera_planning_default": "camera_planning_results.py",
+                     "camera_planning_seeds8": "camera_planning_seeds8.py",
+                     "camera_planning_lego": "camera_planning_lego.py",
+                     "camera_planning_lego_seeds8": "camera_planning_lego_seeds8.py",
+                     "camera_planning_scale": "camera_planning_scale.py"}
+
+
+@pytest.mark.parametrize("results,name", sorted(COMMITTED_RESULTS.items()))
+def test_committed_results_were_made_with_their_config(results, name):
+  recorded = json.loads((ROOT / "results" / results / "config.json").read_text())
+  assert runner._differences(runner._comparable_config(recorded), _comparable(name)) == []

@@ -269,6 +269,19 @@ def test_protocol_runs_end_to_end_and_resumes(tmp_path):
     runner.run_camera_planning(config, str(tmp_path))
 
 
+def test_resume_guard_reads_a_field_added_later_as_the_old_behaviour(tmp_path):
+  config = tiny_config()
+  (tmp_path / "runs").mkdir()
+  (tmp_path / "runs" / "random-seed0.json").write_text("{}")
+  old = json.loads(config.to_json_best_effort())
+  del old["strategy"]["optimize"]["resample_z"]  # written before the field existed
+  (tmp_path / "config.json").write_text(json.dumps(old))
+  runner._check_resumable(config, str(tmp_path))  # False is what those runs did: resumes
+  config.strategy.optimize.resample_z = True
+  with pytest.raises(ValueError, match=r"differences: strategy\.optimize\.resample_z\)"):
+    runner._check_resumable(config, str(tmp_path))
+
+
 def test_table_layout_has_mean_and_std():
   records = [{"strategy": "ours_sel", "label": "Ours (Sel.)", "seed": s,
               "metrics": {"5": {"psnr": 20.0 + s, "ssim": 0.8, "lpips": 0.1}}}

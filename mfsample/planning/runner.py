@@ -463,8 +463,20 @@ _RESUME_FREE_FIELDS = ("seeds", "strategies", "progress", "figures", "data.progr
                        "paired_references")
 
 
+# Fields added to the planning config after workdirs were first written, each with the
+# value that reproduces what runs did before the field existed: a config.json without one
+# reads as having that value, so a newer mfsample can still resume an older workdir.
+_ADDED_FIELDS = {"strategy.optimize.resample_z": False, "strategy.optimize.sampler": ""}
+
+
 def _comparable_config(config_dict):
   d = json.loads(json.dumps(config_dict))
+  for field, value in _ADDED_FIELDS.items():
+    *parents, leaf = field.split(".")
+    node = d
+    for p in parents:
+      node = node.setdefault(p, {})
+    node.setdefault(leaf, value)
   for field in _RESUME_FREE_FIELDS:
     *parents, leaf = field.split(".")
     node = d
@@ -472,6 +484,20 @@ def _comparable_config(config_dict):
       node = node.get(p, {})
     node.pop(leaf, None)
   return d
+
+
+def _differences(old, new, prefix=""):
+  """Dotted paths of the leaves where two nested dicts differ."""
+  if not (isinstance(old, dict) and isinstance(new, dict)):
+    return [] if old == new else [prefix or "(root)"]
+  out = []
+  for key in sorted(set(old) | set(new)):
+    path = f"{prefix}.{key}" if prefix else key
+    if key not in old or key not in new:
+      out.append(path)
+    else:
+      out += _differences(old[key], new[key], path)
+  return out
 
 
 def _check_resumable(config, workdir):
@@ -483,10 +509,10 @@ def _check_resumable(config, workdir):
     old = _comparable_config(json.load(f))
   new = _comparable_config(json.loads(config.to_json_best_effort()))
   if old != new:
-    changed = sorted(k for k in set(old) | set(new) if old.get(k) != new.get(k))
     raise ValueError(
-        f"{workdir} holds runs made with a different config (differences under: "
-        f"{', '.join(changed)}); use a new --workdir, or remove {workdir}/runs to redo them.")
+        f"{workdir} holds runs made with a different config (differences: "
+        f"{', '.join(_differences(old, new))}); use a new --workdir, or remove "
+        f"{workdir}/runs to redo them.")
 
 
 def run_camera_planning(config, workdir):
