@@ -69,32 +69,20 @@ def _load_rows(path, header):
 
 def _scores(names, config, pool, trainer, selected, seed, budgets):
   """{strategy: [C] scores} and {strategy: pick} on the view set `selected`."""
-  import jax
   import numpy as np
 
   from mfsample.planning import strategies
-  from mfsample.planning.pool import stack_cameras
+  from mfsample.planning.runner import choose_next
 
-  cands = pool.candidates
-  available = np.ones(len(cands), bool)
+  available = np.ones(len(pool.candidates), bool)
   available[[s.index for s in selected]] = False
   scores, picks = {}, {}
   for name in names:
     strategy = strategies.make_strategy(name, config)
     if strategy.new_poses:
       raise ValueError(f"{name} proposes new poses; only selection strategies are scored.")
-    model = None
-    if strategy.model_kind is not None:
-      model = trainer.round_model(strategy.model_kind, selected, seed)
-    inputs = strategies.Inputs(
-        model=model, train_cameras=stack_cameras([s.camera for s in selected]),
-        candidates=cands.cameras, available=available, sphere=pool.sphere,
-        bounds=pool.bounds, background=pool.background, settings=dict(budgets),
-        max_views=int(config.max_views))
-    # The key of `runner.plan_views` in the same round: the same probes and draws.
-    key = jax.random.fold_in(jax.random.PRNGKey(int(seed)), strategies.NAMES.index(name))
-    choice = strategy.select(inputs, jax.random.fold_in(key, len(selected)))
-    budgets.update(choice.info.get("settings", {}))
+    # The round of `runner.plan_views`: the same round models, probes and draws.
+    choice = choose_next(strategy, pool, config, seed, trainer, budgets, selected, available)
     scores[name] = np.where(available, np.asarray(choice.info["scores"], np.float64), np.nan)
     picks[name] = int(choice.index)
   return scores, picks

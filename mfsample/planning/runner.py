@@ -252,6 +252,41 @@ def evaluate_model(model, views: Views, *, background, settings, lpips_fn=None):
   return out, settings
 
 
+def choose_next(strategy, pool: Pool, config, seed, trainer: Trainer, budgets, selected,
+                available):
+  """One round of a strategy: its choice of the next view after the views `selected`.
+
+  Trains (or takes from `trainer`'s cache) the round model the strategy needs and draws its
+  random key from the seed, the strategy and the round, so a round can be replayed alone.
+
+  Args:
+    strategy: `strategies.Strategy`.
+    pool: `Pool`.
+    config: planning config.
+    seed: int.
+    trainer: `Trainer`.
+    budgets: {purpose: RenderSettings} shared across strategies; updated in place.
+    selected: list of `Selected`, the current views.
+    available: [C] bool, candidates not selected yet.
+
+  Returns:
+    the strategy's `strategies.Choice`.
+  """
+  model = None
+  if strategy.model_kind is not None:
+    model = trainer.round_model(strategy.model_kind, selected, seed)
+  inputs = strategies.Inputs(
+      model=model, train_cameras=stack_cameras([s.camera for s in selected]),
+      candidates=pool.candidates.cameras, available=available, sphere=pool.sphere,
+      bounds=pool.bounds, background=pool.background, settings=dict(budgets),
+      max_views=int(config.max_views))
+  key = jax.random.fold_in(jax.random.PRNGKey(int(seed)), strategies.NAMES.index(
+      strategy.name) if strategy.name in strategies.NAMES else 99)
+  choice = strategy.select(inputs, jax.random.fold_in(key, len(selected)))
+  budgets.update(choice.info.get("settings", {}))
+  return choice
+
+
 def plan_views(strategy, pool: Pool, config, seed, trainer: Trainer, budgets, on_round=None):
   """Runs one strategy for one seed up to `config.max_views` views.
 
@@ -276,20 +311,9 @@ def plan_views(strategy, pool: Pool, config, seed, trainer: Trainer, budgets, on
                        float("nan"), 0.0, {})]
   available = np.ones(len(cands), bool)
   available[first] = False
-  key = jax.random.fold_in(jax.random.PRNGKey(int(seed)), strategies.NAMES.index(
-      strategy.name) if strategy.name in strategies.NAMES else 99)
   while len(selected) < int(config.max_views):
     t0 = time.perf_counter()
-    model = None
-    if strategy.model_kind is not None:
-      model = trainer.round_model(strategy.model_kind, selected, seed)
-    inputs = strategies.Inputs(
-        model=model, train_cameras=stack_cameras([s.camera for s in selected]),
-        candidates=cands.cameras, available=available, sphere=pool.sphere,
-        bounds=pool.bounds, background=pool.background, settings=dict(budgets),
-        max_views=int(config.max_views))
-    choice = strategy.select(inputs, jax.random.fold_in(key, len(selected)))
-    budgets.update(choice.info.get("settings", {}))
+    choice = choose_next(strategy, pool, config, seed, trainer, budgets, selected, available)
     if choice.index is not None:
       image = np.asarray(cands.images[choice.index])
       available[choice.index] = False
