@@ -56,11 +56,11 @@ def main(argv):
   config = _CONFIG.value
   with open(_RESULTS.value) as f:
     results = json.load(f)
-  check_run_matches(config, results)
   wanted = set(_STRATEGIES.value) or set(results["strategies"])
   runs = [r for r in results["runs"] if r["strategy"] in wanted]
   views = [int(v) for v in _VIEWS.value]
   pool = make_pool(config.data)
+  check_run_matches(pool, results)
   selections = [(run, selected_from_record(run, pool)) for run in runs]
 
   rows = []

@@ -80,7 +80,6 @@ def main(argv):
   config = _CONFIG.value
   with open(_RESULTS.value) as f:
     results = json.load(f)
-  check_run_matches(config, results)
   seeds = [int(s) for s in _SEEDS.value] or [int(s) for s in results["seeds"]]
   runs = [r for r in results["runs"] if r["strategy"] == "ours_opt_sel" and r["seed"] in seeds]
   if not runs:
@@ -96,6 +95,7 @@ def main(argv):
                      "nodrop" in flags_, steps[0] if steps else None))
 
   pool = make_pool(config.data)
+  check_run_matches(pool, results)
   trainer = Trainer(config, pool)
   model_kind = strategies.make_strategy("ours_opt_sel", config).model_kind
   s = config.strategy

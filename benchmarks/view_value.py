@@ -204,13 +204,13 @@ def run():
   config.data.progress = False
   with open(_RESULTS.value) as f:
     results = json.load(f)
-  check_run_matches(config, results)
   names = list(_STRATEGIES.value)
   header = {"results": _RESULTS.value, "prefix": _PREFIX.value,
             "config": config_flags.get_config_filename(flags.FLAGS["config"]),
             "final_steps": int(config.final_train.train.num_steps),
             "round_steps": int(config.rounds.steps)}
   pool = make_pool(config.data)
+  check_run_matches(pool, results)
   values = _Values(config, pool, header, _OUT.value)
   budgets, cases = {}, []
 

@@ -257,6 +257,11 @@ def test_protocol_runs_end_to_end_and_resumes(tmp_path):
       assert len(set(rec["indices"])) == config.max_views  # no candidate twice
   table = (tmp_path / "table.md").read_text()
   assert "Ours (Opt. Rnd.)" in table and "PSNR↑ (3 views)" in table
+  # The benchmarks that reuse a run check its pool against the config's.
+  pool = tiny_pool()
+  runner.check_run_matches(pool, results)
+  with pytest.raises(ValueError, match=r"resolution \[24, 24\] \(the run's \[32, 32\]\)"):
+    runner.check_run_matches(pool, {**results, "resolution": [32, 32]})
   # A killed run resumes: finished (strategy, seed) runs are read back, not recomputed.
   run_file = tmp_path / "runs" / "random-seed0.json"
   stamp = os.path.getmtime(run_file)

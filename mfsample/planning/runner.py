@@ -369,14 +369,21 @@ def selected_from_record(record, pool):
   return out
 
 
-def check_run_matches(config, results):
-  """Raises unless `config` describes the pool of a finished run (its `results.json`)."""
-  width, height = (int(v) for v in results["resolution"])
-  if (int(config.data.width), int(config.data.height)) != (width, height):
-    raise ValueError(f"the config's images are {config.data.width} x {config.data.height}, "
-                     f"the run's {width} x {height}: pass the config the run was made with.")
-  if int(config.data.num_candidates) != int(results["num_candidates"]):
-    raise ValueError("the config and the run differ in data.num_candidates.")
+def check_run_matches(pool, results):
+  """Raises unless `pool` (built from a config) is the pool of a finished run (`results.json`).
+
+  Compared on the pool itself, not on config fields: a blender scene's size comes from its
+  files and `data.downscale`, not from `data.width` / `data.height`.
+  """
+  have = {"scene": pool.name,
+          "resolution": [int(pool.candidates.images.shape[2]),
+                         int(pool.candidates.images.shape[1])],
+          "num_candidates": len(pool.candidates), "num_test": len(pool.test)}
+  differ = [f"{key} {have[key]} (the run's {results.get(key)})" for key in have
+            if key in results and have[key] != results[key]]
+  if differ:
+    raise ValueError("the config's pool differs from the run's: " + ", ".join(differ)
+                     + "; pass the config the run was made with.")
 
 
 # ------------------------------------------------------------------ aggregation
