@@ -90,10 +90,9 @@ def _scores(names, config, pool, trainer, selected, seed, budgets):
 
 def _elevation(cameras, center):
   """Degrees above the horizontal plane through the scene centre (z up) of each camera."""
-  import numpy as np
+  from mfsample.planning.poses import camera_to_uv
 
-  d = np.asarray(cameras.center, np.float64) - np.asarray(center, np.float64)
-  return np.degrees(np.arcsin(d[:, 2] / np.linalg.norm(d, axis=1)))
+  return 90.0 - 180.0 * camera_to_uv(cameras, center)[:, 1]  # v = polar angle / pi
 
 
 def _chosen_elevations(results, pool):
@@ -167,18 +166,16 @@ class _Values:
 
   def compute(self, seed, selected, todo, train_seed, desc):
     """A row per candidate in `todo` (None: the view set alone) not computed before."""
-    import numpy as np
     from tqdm.auto import tqdm
 
     from mfsample._json import write_json
-    from mfsample.planning.runner import Selected
+    from mfsample.planning.runner import candidate_view
 
-    cands, n = self.pool.candidates, len(selected)
+    n = len(selected)
     for c in tqdm(todo, desc=desc):
       if (seed, n, c, train_seed) in self.done:
         continue
-      extra = [] if c is None else [Selected(c, cands.cameras[c], np.asarray(cands.images[c]),
-                                             float("nan"), 0.0, {})]
+      extra = [] if c is None else [candidate_view(self.pool, c)]
       t0 = time.perf_counter()
       metrics = self.psnr(selected + extra, train_seed)
       self.rows.append({"seed": seed, "views": n, "candidate": c, "train_seed": train_seed,

@@ -53,8 +53,7 @@ def trained_one_view(kind="lowrank", view=0):
   config = tiny_config()
   pool = tiny_pool()
   trainer = runner.Trainer(config, pool)
-  sel = [runner.Selected(view, pool.candidates.cameras[view],
-                         np.asarray(pool.candidates.images[view]), 0.0, 0.0, {})]
+  sel = [runner.candidate_view(pool, view)]
   return trainer.round_state("deterministic" if kind == "deterministic" else "stochastic",
                              sel, 0)
 

@@ -68,6 +68,13 @@ class Selected(NamedTuple):
 # ------------------------------------------------------------------ pure pieces
 
 
+def candidate_view(pool: Pool, index) -> Selected:
+  """Candidate `index` of `pool` as a view of a trajectory (no score, no round time)."""
+  cands = pool.candidates
+  return Selected(int(index), cands.cameras[int(index)], np.asarray(cands.images[int(index)]),
+                  float("nan"), 0.0, {})
+
+
 def initial_index(config, seed, num_candidates):
   """The first view: `config.initial_view`, or (if < 0) a seeded random candidate."""
   if int(config.initial_view) >= 0:
@@ -307,8 +314,7 @@ def plan_views(strategy, pool: Pool, config, seed, trainer: Trainer, budgets, on
                      f"{pool.name!r} has no oracle to capture them")
   cands = pool.candidates
   first = initial_index(config, seed, len(cands))
-  selected = [Selected(first, cands.cameras[first], np.asarray(cands.images[first]),
-                       float("nan"), 0.0, {})]
+  selected = [candidate_view(pool, first)]
   available = np.ones(len(cands), bool)
   available[first] = False
   while len(selected) < int(config.max_views):
@@ -357,8 +363,7 @@ def selected_from_record(record, pool):
   out = []
   for index, w2c in zip(record["indices"], record["world_to_camera"], strict=True):
     if index is not None:
-      out.append(Selected(int(index), cands.cameras[int(index)],
-                          np.asarray(cands.images[int(index)]), float("nan"), 0.0, {}))
+      out.append(candidate_view(pool, index))
       continue
     if pool.oracle is None:
       raise ValueError(f"{record['strategy']} chose a new pose but the pool has no oracle.")
@@ -369,16 +374,21 @@ def selected_from_record(record, pool):
   return out
 
 
+def pool_record(pool):
+  """What results.json records of the pool: scene, [width, height], candidate and test counts."""
+  return {"scene": pool.name,
+          "resolution": [int(pool.candidates.images.shape[2]),
+                         int(pool.candidates.images.shape[1])],
+          "num_candidates": len(pool.candidates), "num_test": len(pool.test)}
+
+
 def check_run_matches(pool, results):
   """Raises unless `pool` (built from a config) is the pool of a finished run (`results.json`).
 
   Compared on the pool itself, not on config fields: a blender scene's size comes from its
   files and `data.downscale`, not from `data.width` / `data.height`.
   """
-  have = {"scene": pool.name,
-          "resolution": [int(pool.candidates.images.shape[2]),
-                         int(pool.candidates.images.shape[1])],
-          "num_candidates": len(pool.candidates), "num_test": len(pool.test)}
+  have = pool_record(pool)
   differ = [f"{key} {have[key]} (the run's {results.get(key)})" for key in have
             if key in results and have[key] != results[key]]
   if differ:
@@ -632,11 +642,8 @@ def run_camera_planning(config, workdir):
     figures.landscape_figure(land, os.path.join(workdir, "landscape.png"))
     fig_seconds = time.perf_counter() - t0
   results = {
-      "scene": pool.name, "seeds": list(config.seeds), "strategies": names,
+      **pool_record(pool), "seeds": list(config.seeds), "strategies": names,
       "skipped_strategies": skipped, "eval_views": list(eval_views),
-      "resolution": [int(pool.candidates.images.shape[2]),
-                     int(pool.candidates.images.shape[1])],
-      "num_candidates": len(pool.candidates), "num_test": len(pool.test),
       "round_steps": int(config.rounds.steps), "warm_start": bool(config.rounds.warm_start),
       "final_steps": int(config.final_train.train.num_steps),
       "summary": summary, "paired_psnr": paired, "runs": records,
@@ -660,8 +667,7 @@ def landscape(config, pool: Pool, trainer: Trainer, budgets):
   seed = int(config.seeds[0])
   cands = pool.candidates
   first = initial_index(config, seed, len(cands))
-  sel = [Selected(first, cands.cameras[first], np.asarray(cands.images[first]), float("nan"),
-                  0.0, {})]
+  sel = [candidate_view(pool, first)]
   model = trainer.round_model("stochastic", sel, seed)
   f = config.figures
   down = int(config.strategy.optimize.downscale)
