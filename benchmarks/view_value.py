@@ -55,18 +55,6 @@ _REPEAT_OFFSET = flags.DEFINE_integer("repeat_offset", 1000, "Seed offset of the
 _OUT = flags.DEFINE_string("out", "results/view_value.json", "JSON output (resumable).")
 
 
-def _load_rows(path, header):
-  """Rows of an earlier call with the same header, to resume; [] otherwise."""
-  if not os.path.exists(path):
-    return []
-  with open(path) as f:
-    old = json.load(f)
-  if old.get("header") != header:
-    raise ValueError(f"{path} was written for another run, prefix or config; pass --out "
-                     "to write elsewhere.")
-  return old["rows"]
-
-
 def _scores(names, config, pool, trainer, selected, seed, budgets):
   """{strategy: [C] scores} and {strategy: pick} on the view set `selected`."""
   import numpy as np
@@ -146,11 +134,12 @@ class _Values:
   """Trains and evaluates final models on view sets, and keeps every row (resumable)."""
 
   def __init__(self, config, pool, header, out):
+    from mfsample._json import read_resumable_rows
     from mfsample.planning.runner import Trainer
 
     self.pool, self.header, self.out = pool, header, out
     self.trainer = Trainer(config, pool)
-    self.rows = _load_rows(out, header)
+    self.rows = read_resumable_rows(out, header)
     self.done = {(r["seed"], r["views"], r["candidate"], r["train_seed"]) for r in self.rows}
     self.settings = None
 
