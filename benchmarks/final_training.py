@@ -56,19 +56,19 @@ _REFERENCES = flags.DEFINE_list(
 _OUT = flags.DEFINE_string("out", "results/final_training.json", "JSON output (resumable).")
 
 
-def _models_to_train(runs, views, steps_list, train_seeds_of, final_steps):
+def _models_to_train(runs, views, steps_list, train_seeds_of, reuse_at_steps):
   """(run, n, steps, train_seed, from the record?) of every final model, initialisation-major
-  so that a run stopped early has the same initialisations for every view set."""
+  so that a run stopped early has the same initialisations for every view set. The first
+  initialisation at `reuse_at_steps` (None: never) is read from the run's record."""
   for steps in steps_list:
     for k in range(_INITS.value):
       for run in runs:
         for n in views:
-          yield run, n, steps, train_seeds_of(run)[k], (
-              _REUSE_RUN.value and k == 0 and steps == final_steps)
+          yield run, n, steps, train_seeds_of(run)[k], k == 0 and steps == reuse_at_steps
 
 
 def _per_view_set(rows, steps, n):
-  """{(strategy, seed): [PSNR per initialisation]} at one length and view count."""
+  """{(strategy, seed): [row per initialisation]} at one length and view count."""
   out = {}
   for r in rows:
     if r["steps"] == steps and r["views"] == n:
@@ -120,9 +120,9 @@ def _report(results, rows, steps_list, views, inits):
               f"{np.median(spread):.3f} dB, mean {np.mean(spread):.3f} over {len(spread)} "
               "view sets")
       # The same differences from the first initialisation alone (the run's own models).
-      first = [{"strategy": s, "seed": seed, "metrics": {str(n): {"psnr": rs[0]["psnr"]}}}
+      first = [{"strategy": s, "seed": seed, "metrics": {str(n): {"psnr": r["psnr"]}}}
                for (s, seed), rs in sorted(sets.items(), key=lambda kv: kv[0][1])
-               if rs[0]["train_seed"] == seed]
+               for r in rs if r["train_seed"] == seed]
       for reference in references:
         paired = paired_differences(records, [n], reference)
         entry.setdefault("paired_psnr", {})[reference] = paired
@@ -197,7 +197,8 @@ def main(argv):
             "init_offset": _INIT_OFFSET.value, "reuse_run": _REUSE_RUN.value}
   rows = read_resumable_rows(_OUT.value, header)
   done = {(r["strategy"], r["seed"], r["views"], r["steps"], r["train_seed"]) for r in rows}
-  todo = [m for m in _models_to_train(runs, views, steps_list, train_seeds_of, final_steps)
+  reuse_at_steps = final_steps if _REUSE_RUN.value else None
+  todo = [m for m in _models_to_train(runs, views, steps_list, train_seeds_of, reuse_at_steps)
           if (m[0]["strategy"], int(m[0]["seed"]), m[1], m[2], m[3]) not in done]
 
   trainers, settings = {}, None
