@@ -22,7 +22,7 @@ same `--out` resumes, and may add strategies, view counts, lengths or initialisa
   PYTHONPATH=. python benchmarks/final_training.py \
       --results=results/camera_planning_default/results.json --steps=600,2000 --views=10
   PYTHONPATH=. python benchmarks/final_training.py --config=configs/camera_planning_seeds8.py \
-      --results=results/camera_planning_seeds8/results.json --steps=600 --views=10 \
+      --results=results/camera_planning_seeds8/results.json --steps=600 --views=5,10 \
       --inits=5 --reuse_run --out=results/final_inits_default.json
 
 Prints PSNR / SSIM mean +- std over seeds per strategy and step count (of the mean over
@@ -235,6 +235,12 @@ def main(argv):
     print(f"\nat the run's {final_steps} steps and seeds the PSNRs reproduce the run's "
           f"within {max(reproduced):.3f} dB")
   trained = [r for r in rows_now if not r["from_run_record"]]
+  for steps in steps_list:
+    for n in views:
+      seconds = [r["seconds"] for r in trained if r["steps"] == steps and r["views"] == n]
+      if seconds:
+        print(f"{n} views, {steps} steps: {len(seconds)} models trained, "
+              f"{sum(seconds) / 60:.0f} min as recorded per row ({np.mean(seconds):.0f} s each)")
   write_json(_OUT.value, {
       "header": header, "inits": _INITS.value, "rows": rows,
       "max_reproduction_error_db": max(reproduced) if reproduced else None,

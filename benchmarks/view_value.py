@@ -247,6 +247,9 @@ def run():
   for name, st in chosen.items():
     print(f"  {name}: median {st['median']:.0f}, above 60: {100 * st['above_60']:.0f}% "
           f"({st['count']} views)")
+  seconds = [r["seconds"] for r in values.rows]
+  print(f"\n{len(seconds)} final models in the file, {sum(seconds):.0f} s of training and "
+        f"evaluation as recorded per row ({np.mean(seconds):.0f} s each)")
   write_json(_OUT.value, {"header": header, "rows": values.rows, "cases": cases,
                           "chosen_elevation": chosen}, indent=1)
   print(f"wrote {_OUT.value}")
