@@ -25,7 +25,8 @@ ahead at this scale; if it is worth much more and the picks miss it, the scores 
 
 The view sets (`--cases`) are the first views that `--prefix` chose in `--results` (the
 check: the prefix strategy's own pick is the view its run took next). Resumable: rows
-already in `--out` (same run, prefix, config) are kept and not recomputed.
+already in `--out` (same run, prefix, config) are kept and not recomputed. With no cases
+(`--cases=`) it trains nothing and prints only where each strategy of the run looked.
 
   PYTHONPATH=. python benchmarks/view_value.py --cases=0:9,1:9,0:4
 """
@@ -248,8 +249,9 @@ def run():
     print(f"  {name}: median {st['median']:.0f}, above 60: {100 * st['above_60']:.0f}% "
           f"({st['count']} views)")
   seconds = [r["seconds"] for r in values.rows]
-  print(f"\n{len(seconds)} final models in the file, {sum(seconds):.0f} s of training and "
-        f"evaluation as recorded per row ({np.mean(seconds):.0f} s each)")
+  if seconds:
+    print(f"\n{len(seconds)} final models in the file, {sum(seconds):.0f} s of training and "
+          f"evaluation as recorded per row ({np.mean(seconds):.0f} s each)")
   write_json(_OUT.value, {"header": header, "rows": values.rows, "cases": cases,
                           "chosen_elevation": chosen}, indent=1)
   print(f"wrote {_OUT.value}")
@@ -265,6 +267,8 @@ def _plot(cases, rows, path):
     import matplotlib.pyplot as plt
   except ImportError:
     print("matplotlib not installed: no plot")
+    return
+  if not cases:
     return
   import numpy as np
   from scipy.stats import rankdata
