@@ -26,7 +26,7 @@ ahead at this scale; if it is worth much more and the picks miss it, the scores 
 The view sets (`--cases`) are the first views that `--prefix` chose in `--results` (the
 check: the prefix strategy's own pick is the view its run took next). Resumable: rows
 already in `--out` (same run, prefix, config) are kept and not recomputed. With no cases
-(`--cases=`) it trains nothing and prints only where each strategy of the run looked.
+(`--cases=`) it trains and writes nothing: it prints where each strategy of the run looked.
 
   PYTHONPATH=. python benchmarks/view_value.py --cases=0:9,1:9,0:4
 """
@@ -103,6 +103,13 @@ def _chosen_elevations(results, pool):
     if chosen:
       out[name] = stats(chosen)
   return out
+
+
+def _print_chosen_elevations(chosen):
+  print("\nelevation (degrees) of the views each strategy chose in the run, all seeds:")
+  for name, st in chosen.items():
+    print(f"  {name}: median {st['median']:.0f}, above 60: {100 * st['above_60']:.0f}% "
+          f"({st['count']} views)")
 
 
 def _summary(case_rows, base_psnr, scores, picks):
@@ -198,6 +205,9 @@ def run():
             "round_steps": int(config.rounds.steps)}
   pool = make_pool(config.data)
   check_run_matches(pool, results)
+  if not _CASES.value:
+    _print_chosen_elevations(_chosen_elevations(results, pool))
+    return
   values = _Values(config, pool, header, _OUT.value)
   budgets, cases = {}, []
 
@@ -244,14 +254,10 @@ def run():
     cases.append(summary)
     _print_case(summary)
   chosen = _chosen_elevations(results, pool)
-  print("\nelevation (degrees) of the views each strategy chose in the run, all seeds:")
-  for name, st in chosen.items():
-    print(f"  {name}: median {st['median']:.0f}, above 60: {100 * st['above_60']:.0f}% "
-          f"({st['count']} views)")
+  _print_chosen_elevations(chosen)
   seconds = [r["seconds"] for r in values.rows]
-  if seconds:
-    print(f"\n{len(seconds)} final models in the file, {sum(seconds):.0f} s of training and "
-          f"evaluation as recorded per row ({np.mean(seconds):.0f} s each)")
+  print(f"\n{len(seconds)} final models in the file, {sum(seconds):.0f} s of training and "
+        f"evaluation as recorded per row ({np.mean(seconds):.0f} s each)")
   write_json(_OUT.value, {"header": header, "rows": values.rows, "cases": cases,
                           "chosen_elevation": chosen}, indent=1)
   print(f"wrote {_OUT.value}")
@@ -267,8 +273,6 @@ def _plot(cases, rows, path):
     import matplotlib.pyplot as plt
   except ImportError:
     print("matplotlib not installed: no plot")
-    return
-  if not cases:
     return
   import numpy as np
   from scipy.stats import rankdata

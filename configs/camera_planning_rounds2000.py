@@ -9,8 +9,7 @@ protocol (64 x 64, rounds and scoring at 32 x 32, 600 final steps), with the vol
 stopped for the last 100 steps of a round as in the authors' code. Farthest point trains no
 round model: its views and final models are those of `configs/camera_planning_seeds8.py`,
 and it runs here so that the pairing is checked rather than assumed. 97 minutes for the 8
-seeds on two CPU cores (a run of Ours (Sel.) 266-365 s, against 144-233 s with the main
-job's 400-step rounds).
+seeds on two CPU cores.
 
   python experiments/camera_planning.py --config=configs/camera_planning_rounds2000.py \
       --workdir=workdirs/camera_planning_rounds2000
