@@ -98,10 +98,16 @@ def _chosen_elevations(results, pool):
   out = {"candidates": stats(elev),
          "test": stats(_elevation(pool.test.cameras, pool.sphere.center))}
   for name in results["strategies"]:
-    chosen = [elev[i] for r in results["runs"] if r["strategy"] == name
-              for i in r["indices"][1:] if i is not None]
+    # Each record's uv (`runner.run_record`) covers the optimised poses too; v = polar / pi.
+    chosen = [90.0 - 180.0 * v for r in results["runs"] if r["strategy"] == name
+              for _, v in r["uv"][1:]]
     if chosen:
       out[name] = stats(chosen)
+    # The optimising strategies also record where each ascent started (`uv0`).
+    starts = [90.0 - 180.0 * info["uv0"][1] for r in results["runs"] if r["strategy"] == name
+              for info in r["optimisation"][1:] if "uv0" in info]
+    if starts:
+      out[f"{name} (ascent starts)"] = stats(starts)
   return out
 
 
