@@ -77,11 +77,16 @@ def _scores(names, config, pool, trainer, selected, seed, budgets):
   return scores, picks
 
 
+def _elevation_of_v(v):
+  """Degrees above the horizontal plane through the scene centre (z up); v = polar angle / pi."""
+  return 90.0 - 180.0 * v
+
+
 def _elevation(cameras, center):
-  """Degrees above the horizontal plane through the scene centre (z up) of each camera."""
+  """`_elevation_of_v` of each camera."""
   from mfsample.planning.poses import camera_to_uv
 
-  return 90.0 - 180.0 * camera_to_uv(cameras, center)[:, 1]  # v = polar angle / pi
+  return _elevation_of_v(camera_to_uv(cameras, center)[:, 1])
 
 
 def _chosen_elevations(results, pool):
@@ -98,13 +103,13 @@ def _chosen_elevations(results, pool):
   out = {"candidates": stats(elev),
          "test": stats(_elevation(pool.test.cameras, pool.sphere.center))}
   for name in results["strategies"]:
-    # Each record's uv (`runner.run_record`) covers the optimised poses too; v = polar / pi.
-    chosen = [90.0 - 180.0 * v for r in results["runs"] if r["strategy"] == name
+    # Each record's uv (`runner.run_record`) covers the optimised poses too.
+    chosen = [_elevation_of_v(v) for r in results["runs"] if r["strategy"] == name
               for _, v in r["uv"][1:]]
     if chosen:
       out[name] = stats(chosen)
     # The optimising strategies also record where each ascent started (`uv0`).
-    starts = [90.0 - 180.0 * info["uv0"][1] for r in results["runs"] if r["strategy"] == name
+    starts = [_elevation_of_v(info["uv0"][1]) for r in results["runs"] if r["strategy"] == name
               for info in r["optimisation"][1:] if "uv0" in info]
     if starts:
       out[f"{name} (ascent starts)"] = stats(starts)
