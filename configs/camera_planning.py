@@ -19,7 +19,11 @@ from mfsample.planning.strategies import NAMES
 
 
 def _training(steps, kind):
-  """A training config for `steps` steps without densification (`configs/train_default`)."""
+  """A training config for `steps` steps without densification (`configs/train_default`).
+
+  `steps` may be a `FieldReference` (the rounds pass `rounds.steps`'s): num_steps then
+  follows it, and log_every follows it until a config sets its own.
+  """
   t = train_default.get_config()
   t.sampler.kind = kind  # Rounds of Ours: "lowrank"; the baselines' rounds set their own.
   t.sampler.rank = 2  # k = 2, the paper's default.
@@ -28,7 +32,7 @@ def _training(steps, kind):
   t.model.max_gaussians = 8_000
   t.train.num_steps = steps
   t.train.progress = False
-  t.train.log_every = steps
+  t.train.log_every = steps * 1  # A derived reference: setting it leaves num_steps alone.
   t.densify.start = 100_000  # No densification (static shapes: one compilation per kind).
   t.densify.stop = 100_000
   t.densify.opacity_reset_every = 100_000
@@ -91,8 +95,9 @@ def get_config():
   # The round models only rank views: they train on 2x downscaled images (32 x 32), the
   # resolution at which candidates are scored (`strategy.score_downscale`).
   rounds.downscale = 2
-  # The training config of the rounds (its num_steps is set from `rounds`). Ours: lowrank.
-  config.round_train = _training(rounds.steps, "lowrank")
+  # The training config of the rounds; its num_steps is `rounds.steps` (one field: setting
+  # either sets both; with warm_start the runner spans it over all rounds). Ours: lowrank.
+  config.round_train = _training(rounds.get_ref("steps"), "lowrank")
   # Final plain 3DGS (authors: 7000). Test PSNR still rises past 600 steps; the budget is
   # the main job's 20 minutes.
   config.final_train = _training(600, "deterministic")

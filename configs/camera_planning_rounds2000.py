@@ -26,7 +26,5 @@ def get_config():
   config.seeds = tuple(range(8))
   config.strategies = ("farthest", "ours_sel", "fisher", "ours_opt_sel")
   config.rounds.steps = ROUND_STEPS
-  config.round_train.train.num_steps = ROUND_STEPS
-  config.round_train.train.log_every = ROUND_STEPS
   config.round_train.loss.volume_stop_before_end = 100  # The authors' value at 2000 steps.
   return config

@@ -19,8 +19,6 @@ def get_config():
   config.data.width = 96
   config.data.height = 96
   config.rounds.steps = 600
-  config.round_train.train.num_steps = 600
-  config.round_train.train.log_every = 600
   config.round_train.loss.volume_stop_before_end = 15  # Same share of the round as 10 / 400.
   config.final_train.train.num_steps = 900
   config.final_train.train.log_every = 900

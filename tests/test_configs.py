@@ -61,6 +61,17 @@ def test_planning_config_names_real_strategies(name):
   assert max(config.eval_views) <= config.max_views and len(config.seeds) >= 1
 
 
+@pytest.mark.parametrize("name", PLANNING_CONFIGS)
+def test_round_training_length_is_one_field(name):
+  """config.json records the rounds' training length the runner uses (`round_config`)."""
+  config = _planning_config(name)
+  assert config.round_train.train.num_steps == config.rounds.steps
+  config.rounds.steps += 7
+  assert config.round_train.train.num_steps == config.rounds.steps
+  if not config.rounds.warm_start:
+    assert runner.round_config(config, "lowrank").train.num_steps == config.rounds.steps
+
+
 def _comparable(name):
   return runner._comparable_config(json.loads(_planning_config(name).to_json_best_effort()))
 
