@@ -29,7 +29,10 @@ def main(argv):
     raise app.UsageError(f"Unexpected arguments: {argv[1:]}")
   results = run_camera_planning(_CONFIG.value, _WORKDIR.value)
   print(open(f"{_WORKDIR.value}/table.md").read())
-  print(f"wall-clock of this call: {results['seconds']['total_this_call']:.0f} s")
+  seconds = results["seconds"]
+  print(f"wall-clock of this call: {seconds['total_this_call']:.0f} s; of all "
+        f"{len(seconds['calls'])} call(s) on this workdir: "
+        f"{sum(c['seconds'] for c in seconds['calls']):.0f} s")
 
 
 if __name__ == "__main__":

@@ -268,6 +268,11 @@ def test_protocol_runs_end_to_end_and_resumes(tmp_path):
   again = runner.run_camera_planning(config, str(tmp_path))
   assert os.path.getmtime(run_file) == stamp
   assert json.loads(run_file.read_text())["indices"] == again["runs"][0]["indices"]
+  # ... and its results.json keeps the first call's wall-clock beside its own.
+  first, second = again["seconds"]["calls"]
+  assert first["new_runs"] == ["random-seed0", "ours_opt_rnd-seed0"]
+  assert first["seconds"] == results["seconds"]["total_this_call"]
+  assert second == {"seconds": again["seconds"]["total_this_call"], "new_runs": []}
   # Finished runs of another protocol are never mixed into one table.
   config.rounds.steps += 1
   with pytest.raises(ValueError, match="different config.*rounds"):

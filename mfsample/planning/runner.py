@@ -556,12 +556,29 @@ def _check_resumable(config, workdir):
         f"{workdir}/runs to redo them.")
 
 
+def _earlier_calls(workdir):
+  """The wall-clock of the earlier calls on `workdir`, oldest first, from its results.json.
+
+  Each entry is {"seconds", "new_runs"}: the call's total and the runs it computed (None
+  for a results.json written before the list existed, which kept only its last call's).
+  """
+  path = os.path.join(workdir, "results.json")
+  if not os.path.exists(path):
+    return []
+  with open(path) as f:
+    seconds = json.load(f).get("seconds", {})
+  if "calls" in seconds:
+    return list(seconds["calls"])
+  return [{"seconds": float(seconds["total_this_call"]), "new_runs": None}]
+
+
 def run_camera_planning(config, workdir):
   """Runs the protocol for every seed and strategy of `config`; writes and returns results.
 
   Writes to `workdir`: `runs/<strategy>-seed<seed>.json` (as each finishes; existing ones
   are loaded, not recomputed), `results.json`, `table.md`, `cameras.png`, `landscape.png`
-  (+ `landscape.npz`), `config.json`.
+  (+ `landscape.npz`), `config.json`. results.json's `seconds.calls` lists the wall-clock
+  of every call that finished on the workdir since its runs were started, oldest first.
 
   Returns:
     the results dict (as in `results.json`).
@@ -591,6 +608,7 @@ def run_camera_planning(config, workdir):
   trainer = Trainer(config, pool)
   budgets = {}
   records = []
+  new_runs = []
   bar = tqdm(total=len(todo) * (rounds + len(eval_views)), desc="camera planning",
              disable=not config.progress, dynamic_ncols=True)
   for seed, name in todo:
@@ -615,6 +633,7 @@ def run_camera_planning(config, workdir):
     record = run_record(strategy, seed, selected, metrics, time.perf_counter() - t_run, pool)
     write_json(path, record, indent=1)
     records.append(record)
+    new_runs.append(f"{name}-seed{seed}")
   bar.close()
 
   summary = summarise(records, eval_views)
@@ -641,14 +660,19 @@ def run_camera_planning(config, workdir):
     np.savez(os.path.join(workdir, "landscape.npz"), **land)
     figures.landscape_figure(land, os.path.join(workdir, "landscape.png"))
     fig_seconds = time.perf_counter() - t0
+  # A resumed workdir keeps the earlier calls' totals: its runs' cost is the sum of them.
+  resumed = len(new_runs) < len(records)
+  calls = _earlier_calls(workdir) if resumed else []
+  total = time.perf_counter() - t_start
+  calls.append({"seconds": total, "new_runs": new_runs})
   results = {
       **pool_record(pool), "seeds": list(config.seeds), "strategies": names,
       "skipped_strategies": skipped, "eval_views": list(eval_views),
       "round_steps": int(config.rounds.steps), "warm_start": bool(config.rounds.warm_start),
       "final_steps": int(config.final_train.train.num_steps),
       "summary": summary, "paired_psnr": paired, "runs": records,
-      "seconds": {"total_this_call": time.perf_counter() - t_start, "pool": pool_seconds,
-                  "figures": fig_seconds},
+      "seconds": {"total_this_call": total, "pool": pool_seconds, "figures": fig_seconds,
+                  "calls": calls},
   }
   write_json(os.path.join(workdir, "results.json"), results, indent=1)
   return results
