@@ -18,6 +18,9 @@ Nothing else changes, so k = 0 at the run's own `final_steps` reproduces its tab
 that the re-run is the same protocol; `--reuse_run` takes those rows from the record
 instead of training them again). Rows are written as they finish; a later call on the
 same `--out` resumes, and may add strategies, view counts, lengths or initialisations.
+`--reuse_rows_from` takes rows from the output of a call on another run (say, the same
+protocol with fewer seeds) wherever they are the model this call would train: the same
+final training and train seed, on the same views.
 
   PYTHONPATH=. python benchmarks/final_training.py \
       --results=results/camera_planning_default/results.json --steps=600,2000 --views=10
@@ -54,6 +57,10 @@ _REFERENCES = flags.DEFINE_list(
     "references", ["farthest", "fisher", "ours_sel"],
     "Strategies the others are paired with (those the run has).")
 _OUT = flags.DEFINE_string("out", "results/final_training.json", "JSON output (resumable).")
+_REUSE_ROWS_FROM = flags.DEFINE_list(
+    "reuse_rows_from", [], "Outputs of earlier calls (e.g. on a run with fewer seeds) whose "
+    "rows are taken instead of trained again where they are the same model: the same final "
+    "training, the same views (checked against their run's results.json) and train seed.")
 
 
 def _models_to_train(runs, views, steps_list, train_seeds_of, reuse_at_steps):
@@ -65,6 +72,34 @@ def _models_to_train(runs, views, steps_list, train_seeds_of, reuse_at_steps):
       for run in runs:
         for n in views:
           yield run, n, steps, train_seeds_of(run)[k], k == 0 and steps == reuse_at_steps
+
+
+def _same_views(a, b, n):
+  """Whether two run records start with the same `n` views (candidates and poses)."""
+  return (a["indices"][:n] == b["indices"][:n]
+          and a["world_to_camera"][:n] == b["world_to_camera"][:n])
+
+
+def _reusable_rows(path, header, runs, wanted_keys):
+  """Rows of the earlier output `path` that are models this call would train: its final
+  training and initialisation offset equal this call's, and its run chose the same views.
+  Each comes back marked with `reused_from`."""
+  with open(path) as f:
+    old = json.load(f)
+  for field in ("final_train", "init_offset"):
+    if old["header"][field] != header[field]:
+      raise ValueError(f"{path} has another {field} than this call; its rows are other models.")
+  with open(old["header"]["results"]) as f:
+    old_runs = {(r["strategy"], int(r["seed"])): r for r in json.load(f)["runs"]}
+  mine = {(r["strategy"], int(r["seed"])): r for r in runs}
+  out = []
+  for row in old["rows"]:
+    key = (row["strategy"], row["seed"], row["views"], row["steps"], row["train_seed"])
+    run, old_run = mine.get(key[:2]), old_runs.get(key[:2])
+    if (key in wanted_keys and not row["from_run_record"] and old_run is not None
+        and _same_views(run, old_run, row["views"])):
+      out.append({**row, "reused_from": path})
+  return out
 
 
 def _per_view_set(rows, steps, n):
@@ -196,10 +231,26 @@ def main(argv):
             "final_train": json.loads(config.final_train.to_json_best_effort()),
             "init_offset": _INIT_OFFSET.value, "reuse_run": _REUSE_RUN.value}
   rows = read_resumable_rows(_OUT.value, header)
-  done = {(r["strategy"], r["seed"], r["views"], r["steps"], r["train_seed"]) for r in rows}
+
+  def key_of(model):
+    run, n, steps, train_seed, _ = model
+    return run["strategy"], int(run["seed"]), n, steps, train_seed
+
+  def row_key(r):
+    return r["strategy"], r["seed"], r["views"], r["steps"], r["train_seed"]
+
   reuse_at_steps = final_steps if _REUSE_RUN.value else None
-  todo = [m for m in _models_to_train(runs, views, steps_list, train_seeds_of, reuse_at_steps)
-          if (m[0]["strategy"], int(m[0]["seed"]), m[1], m[2], m[3]) not in done]
+  models = list(_models_to_train(runs, views, steps_list, train_seeds_of, reuse_at_steps))
+  for path in _REUSE_ROWS_FROM.value:
+    trained_here = {key_of(m) for m in models if not m[4]}
+    done = {row_key(r) for r in rows}
+    reused = _reusable_rows(path, header, runs, trained_here - done)
+    print(f"{len(reused)} rows reused from {path}")
+    rows += reused
+  if _REUSE_ROWS_FROM.value:
+    write_json(_OUT.value, {"header": header, "rows": rows}, indent=1)
+  done = {row_key(r) for r in rows}
+  todo = [m for m in models if key_of(m) not in done]
 
   trainers, settings = {}, None
   for run, n, steps, train_seed, from_record in tqdm(todo, desc="final models"):
