@@ -288,10 +288,15 @@ def main(argv):
   trained = [r for r in rows_now if not r["from_run_record"]]
   for steps in steps_list:
     for n in views:
-      seconds = [r["seconds"] for r in trained if r["steps"] == steps and r["views"] == n]
+      these = [r for r in trained if r["steps"] == steps and r["views"] == n]
+      seconds = [r["seconds"] for r in these]
+      reused = sum("reused_from" in r for r in these)
       if seconds:
-        print(f"{n} views, {steps} steps: {len(seconds)} models trained, "
-              f"{sum(seconds) / 60:.0f} min as recorded per row ({np.mean(seconds):.0f} s each)")
+        print(f"{n} views, {steps} steps: {len(seconds)} models trained"
+              + (f" ({reused} of them by the call that wrote --reuse_rows_from)" if reused
+                 else "")
+              + f", {sum(seconds) / 60:.0f} min as recorded per row "
+              f"({np.mean(seconds):.0f} s each)")
   write_json(_OUT.value, {
       "header": header, "inits": _INITS.value, "rows": rows,
       "max_reproduction_error_db": max(reproduced) if reproduced else None,
