@@ -130,6 +130,9 @@ def get_config():
   # paper's). The authors' published optimisation command trains rank 0, i.e. "diagonal",
   # with fresh z every step. Neither lifts Opt. Sel. here (README, view optimisation).
   opt.sampler = ""
+  # Ours (Opt. Best) scores every best_every-th pose of the ascent (and its end) as the
+  # candidates are scored, and keeps the best of them and the start: 6 extra scorings here.
+  opt.best_every = 10
   s.fisher = fisher = ml_collections.ConfigDict()
   fisher.probes = 1  # Rademacher probes (backward passes) per candidate.
   fisher.train_probes = 8  # Probes per training view (H_train is in a denominator).

@@ -165,8 +165,7 @@ def test_every_strategy_returns_a_valid_camera(name, models):
   choice = strategy.select(inputs, jax.random.PRNGKey(1))
   _valid_camera(choice.camera, pool.sphere)
   assert np.isfinite(choice.score)
-  if strategy.new_poses:
-    assert choice.index is None
+  if strategy.new_poses and choice.index is None:
     uv = poses.camera_to_uv(choice.camera, pool.sphere.center)
     lo, hi = pool.sphere.v_range
     assert lo - 1e-4 <= uv[1] <= hi + 1e-4
@@ -175,9 +174,65 @@ def test_every_strategy_returns_a_valid_camera(name, models):
     dist = np.linalg.norm(np.asarray(choice.camera.center) - np.asarray(pool.sphere.center))
     assert dist == pytest.approx(pool.sphere.radius, rel=1e-4)
   else:
+    # Only Ours (Opt. Best) among the new-pose strategies may answer with a candidate.
+    assert not strategy.new_poses or name == "ours_opt_best"
     assert choice.index in np.nonzero(available)[0]
     np.testing.assert_allclose(choice.camera.world_to_camera,
                                pool.candidates.cameras[choice.index].world_to_camera)
+
+
+def _opt_best_inputs(pool, config, model, views=(0, 3)):
+  available = np.ones(len(pool.candidates), bool)
+  available[list(views)] = False
+  return strategies.Inputs(model, stack_cameras([pool.candidates.cameras[i] for i in views]),
+                           pool.candidates.cameras, available, pool.sphere, pool.bounds,
+                           pool.background, {}, config.max_views)
+
+
+# "training": only the training view itself is available, where U is lowest, so the ascent
+# from it rises (2.5x on this tiny model) and a moved pose must be kept. "best": from the
+# highest-U candidate, as in the protocol (either branch). lr 0: the ascent stays at the
+# start, so every visited U is the start's (up to the pose's float round trip).
+@pytest.mark.parametrize("start,scale_lr", [("training", 1.0), ("best", 1.0), ("best", 0.0)])
+def test_opt_best_keeps_the_pose_with_the_highest_selection_u(models, start, scale_lr):
+  pool = tiny_pool()
+  config = tiny_config()
+  config.strategy.optimize.lr *= scale_lr
+  config.strategy.optimize.best_every = 5
+  inputs = _opt_best_inputs(pool, config, models["stochastic"], views=(0,))
+  if start == "training":
+    inputs = inputs._replace(available=np.arange(len(pool.candidates)) == 0)
+  choice = strategies.make_strategy("ours_opt_best", config).select(
+      inputs, jax.random.PRNGKey(1))
+  info = choice.info
+  steps = config.strategy.optimize.steps
+  np.testing.assert_array_equal(info["visited_steps"], strategies.visited_steps(steps, 5))
+  # The start is Ours (Sel.)'s choice, scored by the same function.
+  sel = strategies.make_strategy("ours_sel", config).select(inputs, jax.random.PRNGKey(1))
+  assert info["start_index"] == sel.index and info["start_score"] == sel.score
+  assert choice.score == max(sel.score, float(np.max(info["u_visited"])))
+  if choice.index is None:
+    assert info["kept_step"] == info["visited_steps"][np.argmax(info["u_visited"])] > 0
+    # The returned camera is the visited pose that was scored, at the full image size.
+    again, _ = strategies._ours_scores(inputs, config.strategy.ours,
+                                       stack_cameras([choice.camera]))
+    np.testing.assert_allclose(again[0], choice.score, rtol=1e-5)
+    _valid_camera(choice.camera, pool.sphere)
+  else:
+    assert info["kept_step"] == 0 and choice.index == sel.index
+  if start == "training":
+    assert choice.index is None and choice.score > 1.5 * sel.score
+  if scale_lr == 0.0:
+    np.testing.assert_allclose(info["u_visited"], sel.score, rtol=1e-6)
+    assert choice.score == pytest.approx(sel.score, rel=1e-6)
+
+
+def test_visited_steps():
+  np.testing.assert_array_equal(strategies.visited_steps(60, 10), [10, 20, 30, 40, 50, 60])
+  np.testing.assert_array_equal(strategies.visited_steps(12, 10), [10, 12])
+  np.testing.assert_array_equal(strategies.visited_steps(3, 10), [3])
+  with pytest.raises(ValueError, match="best_every"):
+    strategies.visited_steps(60, 0)
 
 
 def test_farthest_point_picks_the_farthest_candidate():

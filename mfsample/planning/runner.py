@@ -330,6 +330,11 @@ def plan_views(strategy, pool: Pool, config, seed, trainer: Trainer, budgets, on
       info = {"uv0": choice.info["uv0"].tolist(), "uv": choice.info["uv"].tolist(),
               "start_index": choice.info.get("start_index"),
               "u_start": choice.info["u_start"], "u_end": choice.info["u_end"]}
+      if "kept_step" in choice.info:  # Ours (Opt. Best): which pose it kept, and their U.
+        info.update(kept_step=choice.info["kept_step"],
+                    start_score=choice.info["start_score"],
+                    visited_steps=choice.info["visited_steps"].tolist(),
+                    u_visited=choice.info["u_visited"].tolist())
     selected.append(Selected(choice.index, choice.camera, image, choice.score,
                              time.perf_counter() - t0, info))
     if on_round is not None:
@@ -507,7 +512,9 @@ _RESUME_FREE_FIELDS = ("seeds", "strategies", "progress", "figures", "data.progr
 # Fields added to the planning config after workdirs were first written, each with the
 # value that reproduces what runs did before the field existed: a config.json without one
 # reads as having that value, so a newer mfsample can still resume an older workdir.
-_ADDED_FIELDS = {"strategy.optimize.resample_z": False, "strategy.optimize.sampler": ""}
+_ADDED_FIELDS = {"strategy.optimize.resample_z": False, "strategy.optimize.sampler": "",
+                 # Read by ours_opt_best only, which no run before it could have used.
+                 "strategy.optimize.best_every": 10}
 
 
 def _comparable_config(config_dict):

@@ -16,6 +16,8 @@ be captured by an oracle), and a pure `select(inputs, key) -> Choice`.
 | ours_sel      | Ours (Sel.)       | max U (Eq. 10) over the candidates                       |
 | ours_opt_sel  | Ours (Opt. Sel.)  | Adam on -U from the Ours (Sel.) choice (`optimize`)      |
 | ours_opt_rnd  | Ours (Opt. Rnd.)  | Adam on -U from a random pose                            |
+| ours_opt_best | Ours (Opt. Best)  | Ours (Opt. Sel.), then the pose with the highest U among |
+|               |                   | its start and the poses it visited                       |
 """
 
 from collections.abc import Callable
@@ -39,6 +41,7 @@ LABELS = {
     "ours_sel": "Ours (Sel.)",
     "ours_opt_sel": "Ours (Opt. Sel.)",
     "ours_opt_rnd": "Ours (Opt. Rnd.)",
+    "ours_opt_best": "Ours (Opt. Best)",
 }
 NAMES = tuple(LABELS)
 
@@ -226,13 +229,15 @@ def activenerf_strategy(cfg) -> Strategy:
 # ------------------------------------------------------------------ ours
 
 
-def _ours_scores(inputs, cfg):
+def _ours_scores(inputs, cfg, cameras=None):
+  """U of the candidates (or of `cameras` [B]) as Ours (Sel.) scores them."""
   model = inputs.model
+  cameras = inputs.candidates if cameras is None else cameras
   z = unc.uncertainty_z(model, int(cfg.select_samples), int(cfg.z_seed))
   out, settings = unc.score_cameras(
-      model, _small(inputs.candidates, cfg), z, settings=_settings(inputs, "score"),
+      model, _small(cameras, cfg), z, settings=_settings(inputs, "score"),
       background=jnp.asarray(inputs.background), chunk_size=int(cfg.chunk_size),
-      num_devices=unc.default_num_devices(len(inputs.available)))
+      num_devices=unc.default_num_devices(cameras.batch_shape[0]))
   return np.asarray(out.values), settings
 
 
@@ -304,6 +309,46 @@ def ours_opt_sel_strategy(cfg, opt_cfg) -> Strategy:
   return Strategy("ours_opt_sel", _opt_model_kind(opt_cfg), True, select)
 
 
+def visited_steps(num_steps, every):
+  """Trajectory indices whose poses Ours (Opt. Best) scores: every `every`-th, and the end."""
+  if every < 1:
+    raise ValueError(f"strategy.optimize.best_every must be >= 1, got {every}")
+  return np.unique(np.r_[np.arange(every, num_steps + 1, every), num_steps])
+
+
+def ours_opt_best_strategy(cfg, opt_cfg) -> Strategy:
+  """Ours (Opt. Sel.) that keeps the best pose it saw: never a lower U than Ours (Sel.).
+
+  The ascent follows the gradient of an M = `opt_cfg.samples` estimate of U at a reduced
+  size, with z scaled down in its second half; at this scale it often ends at a pose with a
+  lower U than its start (README, view optimisation). This variant scores the start and
+  every `opt_cfg.best_every`-th pose of the trajectory (and its end) as Ours (Sel.) scores
+  candidates (M = `cfg.select_samples`, unscaled z, the scoring size) and returns the
+  highest: the start candidate itself when no visited pose beats it (ties keep the start).
+  """
+  def select(inputs, key):
+    scores, settings = _ours_scores(inputs, cfg)
+    start = _pick(inputs, scores, settings={"score": settings})
+    uv0 = poses.camera_to_uv(start.camera, inputs.sphere.center)
+    _, _, info = _optimise(inputs._replace(settings=start.info["settings"]), uv0, cfg,
+                           opt_cfg, key)
+    steps = visited_steps(len(info["trajectory"]) - 1, int(opt_cfg.best_every))
+    visited = poses.spherical_camera(jnp.asarray(info["trajectory"][steps]), inputs.sphere)
+    u_visited, settings = _ours_scores(inputs._replace(settings=info["settings"]), cfg,
+                                       visited)
+    info.update(start_index=start.index, start_score=start.score, scores=scores,
+                visited_steps=steps, u_visited=u_visited,
+                settings=dict(info["settings"], score=settings))
+    best = int(np.argmax(u_visited))
+    if not u_visited[best] > start.score:
+      info["kept_step"] = 0
+      return Choice(start.index, start.camera, start.score, info)
+    info["kept_step"] = int(steps[best])
+    return Choice(None, visited[best], float(u_visited[best]), info)
+
+  return Strategy("ours_opt_best", _opt_model_kind(opt_cfg), True, select)
+
+
 def ours_opt_rnd_strategy(cfg, opt_cfg) -> Strategy:
   """Ours (Opt. Rnd.): Adam on -U over the camera sphere from a random pose."""
   def select(inputs, key):
@@ -327,6 +372,7 @@ def make_strategy(name, config) -> Strategy:
       "ours_sel": lambda: ours_sel_strategy(s.ours),
       "ours_opt_sel": lambda: ours_opt_sel_strategy(s.ours, s.optimize),
       "ours_opt_rnd": lambda: ours_opt_rnd_strategy(s.ours, s.optimize),
+      "ours_opt_best": lambda: ours_opt_best_strategy(s.ours, s.optimize),
   }
   if name not in makers:
     raise ValueError(f"unknown strategy {name!r}; known: {', '.join(NAMES)}")
