@@ -74,34 +74,6 @@ def _models_to_train(runs, views, steps_list, train_seeds_of, reuse_at_steps):
           yield run, n, steps, train_seeds_of(run)[k], k == 0 and steps == reuse_at_steps
 
 
-def _same_views(a, b, n):
-  """Whether two run records start with the same `n` views (candidates and poses)."""
-  return (a["indices"][:n] == b["indices"][:n]
-          and a["world_to_camera"][:n] == b["world_to_camera"][:n])
-
-
-def _reusable_rows(path, header, runs, wanted_keys):
-  """Rows of the earlier output `path` that are models this call would train: its final
-  training and initialisation offset equal this call's, and its run chose the same views.
-  Each comes back marked with `reused_from`."""
-  with open(path) as f:
-    old = json.load(f)
-  for field in ("final_train", "init_offset"):
-    if old["header"][field] != header[field]:
-      raise ValueError(f"{path} has another {field} than this call; its rows are other models.")
-  with open(old["header"]["results"]) as f:
-    old_runs = {(r["strategy"], int(r["seed"])): r for r in json.load(f)["runs"]}
-  mine = {(r["strategy"], int(r["seed"])): r for r in runs}
-  out = []
-  for row in old["rows"]:
-    key = (row["strategy"], row["seed"], row["views"], row["steps"], row["train_seed"])
-    run, old_run = mine.get(key[:2]), old_runs.get(key[:2])
-    if (key in wanted_keys and not row["from_run_record"] and old_run is not None
-        and _same_views(run, old_run, row["views"])):
-      out.append({**row, "reused_from": path})
-  return out
-
-
 def _per_view_set(rows, steps, n):
   """{(strategy, seed): [row per initialisation]} at one length and view count."""
   out = {}
@@ -198,7 +170,7 @@ def main(argv):
   import numpy as np
   from tqdm.auto import tqdm
 
-  from mfsample._json import read_resumable_rows, write_json
+  from mfsample._json import read_resumable_rows, reusable_rows, write_json
   from mfsample.planning.pool import make_pool
   from mfsample.planning.runner import (
     Trainer,
@@ -244,7 +216,7 @@ def main(argv):
   for path in _REUSE_ROWS_FROM.value:
     trained_here = {key_of(m) for m in models if not m[4]}
     done = {row_key(r) for r in rows}
-    reused = _reusable_rows(path, header, runs, trained_here - done)
+    reused = reusable_rows(path, header, runs, trained_here - done)
     print(f"{len(reused)} rows reused from {path}")
     rows += reused
   if _REUSE_ROWS_FROM.value:

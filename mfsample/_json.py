@@ -26,3 +26,37 @@ def read_resumable_rows(path, header):
     raise ValueError(f"{path} was written by a call with other arguments; pass --out to "
                      "write elsewhere.")
   return old["rows"]
+
+
+def _same_views(a, b, n):
+  """Whether two planning run records start with the same `n` views (candidates and poses)."""
+  return (a["indices"][:n] == b["indices"][:n]
+          and a["world_to_camera"][:n] == b["world_to_camera"][:n])
+
+
+def reusable_rows(path, header, runs, wanted_keys):
+  """Rows of another call's final-model file `path` that are models this call would train.
+
+  Used by `benchmarks/final_training.py --reuse_rows_from`. A row qualifies when the file's
+  final training and initialisation offset equal `header`'s (otherwise a ValueError: all its
+  rows are other models), its key (strategy, seed, views, steps, train_seed) is in
+  `wanted_keys`, it was trained (not read from a run record), and its run in the file's own
+  results.json chose the same first `views` views as this call's run of that (strategy,
+  seed) in `runs`. Each comes back marked with `reused_from`.
+  """
+  with open(path) as f:
+    old = json.load(f)
+  for field in ("final_train", "init_offset"):
+    if old["header"][field] != header[field]:
+      raise ValueError(f"{path} has another {field} than this call; its rows are other models.")
+  with open(old["header"]["results"]) as f:
+    old_runs = {(r["strategy"], int(r["seed"])): r for r in json.load(f)["runs"]}
+  mine = {(r["strategy"], int(r["seed"])): r for r in runs}
+  out = []
+  for row in old["rows"]:
+    key = (row["strategy"], row["seed"], row["views"], row["steps"], row["train_seed"])
+    run, old_run = mine.get(key[:2]), old_runs.get(key[:2])
+    if (key in wanted_keys and not row["from_run_record"] and old_run is not None
+        and _same_views(run, old_run, row["views"])):
+      out.append({**row, "reused_from": path})
+  return out
