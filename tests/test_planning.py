@@ -392,3 +392,21 @@ def test_batched_evaluation_matches_the_training_module(models):
                  settings=settings)
   assert ours["psnr"] == pytest.approx(ref.metrics["psnr"], rel=1e-4)
   assert ours["ssim"] == pytest.approx(ref.metrics["ssim"], rel=1e-4)
+
+
+def test_optimisation_summary_counts_rounds_and_kept_poses():
+  opt = [{}, {"u_start": 2.0, "u_end": 1.0}, {"u_start": 1.0, "u_end": 3.0}]
+  best = [{}, {"u_start": 2.0, "u_end": 1.0, "kept_step": 0, "start_score": 4.0,
+               "u_visited": [3.0, 1.0]},
+          {"u_start": 1.0, "u_end": 3.0, "kept_step": 20, "start_score": 4.0,
+           "u_visited": [3.0, 6.0]}]
+  records = [{"strategy": "ours_opt_sel", "optimisation": opt},
+             {"strategy": "ours_opt_best", "optimisation": best},
+             {"strategy": "farthest", "optimisation": [{}, {}, {}]}]
+  summary = runner.optimisation_summary(records + records[:1])
+  assert set(summary) == {"ours_opt_sel", "ours_opt_best"}
+  assert summary["ours_opt_sel"] == {"rounds": 4, "u_rose": 2, "u_end_over_start": 1.75}
+  assert summary["ours_opt_best"] == {"rounds": 2, "u_rose": 1, "u_end_over_start": 1.75,
+                                      "kept_moved": 1, "kept_over_start": 1.25}
+  table = runner.optimisation_markdown(summary, {"ours_opt_sel": "O", "ours_opt_best": "B"})
+  assert "| O | 4 | 2 | 1.750 | - | - |" in table and "| B | 2 | 1 | 1.750 | 1 | 1.250 |" in table

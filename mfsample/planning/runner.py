@@ -501,6 +501,49 @@ def paired_markdown(paired, labels, reference_label, eval_views, metric="psnr",
   return "\n".join(lines) + "\n"
 
 
+def optimisation_summary(records):
+  """How the camera ascent went, per optimising strategy, over all its rounds.
+
+  Returns {strategy: {"rounds", "u_rose" (rounds where U at the ascent's end, as the ascent
+  measures it: M = optimize.samples at its image size, beat U at its start),
+  "u_end_over_start" (mean ratio), and for Ours (Opt. Best) "kept_moved" (rounds that kept a
+  visited pose, not the start) and "kept_over_start" (mean ratio of U as selection measures
+  it, kept pose over start; >= 1)}}. Strategies without an ascent are left out.
+  """
+  out = {}
+  for rec in records:
+    rounds = [o for o in rec.get("optimisation", []) if o and "u_start" in o]
+    if not rounds:
+      continue
+    e = out.setdefault(rec["strategy"], {"rounds": 0, "u_rose": 0, "_ratios": []})
+    e["rounds"] += len(rounds)
+    e["u_rose"] += sum(o["u_end"] > o["u_start"] for o in rounds)
+    e["_ratios"] += [o["u_end"] / o["u_start"] for o in rounds]
+    kept = [o for o in rounds if "kept_step" in o]
+    if kept:
+      e["kept_moved"] = e.get("kept_moved", 0) + sum(o["kept_step"] > 0 for o in kept)
+      e.setdefault("_kept", []).extend(
+          max(o["start_score"], *o["u_visited"]) / o["start_score"] for o in kept)
+  for e in out.values():
+    e["u_end_over_start"] = float(np.mean(e.pop("_ratios")))
+    if "_kept" in e:
+      e["kept_over_start"] = float(np.mean(e.pop("_kept")))
+  return out
+
+
+def optimisation_markdown(summary, labels, order=strategies.NAMES):
+  """`optimisation_summary` as a markdown table."""
+  lines = ["| Method | rounds | ascent raised its U | its U, end / start (mean) | kept a "
+           "visited pose | selection's U, kept / start (mean) |", "|---|---:|---:|---:|---:|---:|"]
+  for name in [n for n in order if n in summary]:
+    e = summary[name]
+    kept = (f"{e['kept_moved']} | {e['kept_over_start']:.3f}" if "kept_moved" in e
+            else "- | -")
+    lines.append(f"| {labels[name]} | {e['rounds']} | {e['u_rose']} | "
+                 f"{e['u_end_over_start']:.3f} | {kept} |")
+  return "\n".join(lines) + "\n"
+
+
 # ------------------------------------------------------------------ the loop
 
 
@@ -656,6 +699,11 @@ def run_camera_planning(config, workdir):
     table += (f"\nPaired by seed (same initial view and initialisation), PSNR minus "
               f"{labels[reference]}'s, mean ± standard error:\n\n")
     table += paired_markdown(paired[reference], labels, labels[reference], eval_views)
+  optimisation = optimisation_summary(records)
+  if optimisation:
+    table += ("\nThe camera ascent of the optimising strategies, over all rounds and seeds "
+              "(its U: M = strategy.optimize.samples at its image size; selection's U: as "
+              "candidates are scored):\n\n" + optimisation_markdown(optimisation, labels))
   with open(os.path.join(workdir, "table.md"), "w") as f:
     f.write(table)
   fig_seconds = 0.0
@@ -677,7 +725,8 @@ def run_camera_planning(config, workdir):
       "skipped_strategies": skipped, "eval_views": list(eval_views),
       "round_steps": int(config.rounds.steps), "warm_start": bool(config.rounds.warm_start),
       "final_steps": int(config.final_train.train.num_steps),
-      "summary": summary, "paired_psnr": paired, "runs": records,
+      "summary": summary, "paired_psnr": paired, "optimisation": optimisation,
+      "runs": records,
       "seconds": {"total_this_call": total, "pool": pool_seconds, "figures": fig_seconds,
                   "calls": calls},
   }
