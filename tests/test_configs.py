@@ -96,7 +96,8 @@ COMMITTED_RESULTS = {"camera_planning_default": "camera_planning_results.py",
                      "camera_planning_scale": "camera_planning_scale.py",
                      "camera_planning_rounds2000": "camera_planning_rounds2000.py",
                      "camera_planning_rounds2000_seeds16":
-                         "camera_planning_rounds2000_seeds16.py"}
+                         "camera_planning_rounds2000_seeds16.py",
+                     "camera_planning_rounds2000_best": "camera_planning_rounds2000_best.py"}
 
 
 @pytest.mark.parametrize("results,name", sorted(COMMITTED_RESULTS.items()))
