@@ -15,7 +15,7 @@ Every number is a field below; `configs/camera_planning_results.py` runs more se
 import ml_collections
 
 from configs import train_default
-from mfsample.planning.strategies import NAMES
+from mfsample.planning.strategies import TABLE1_NAMES
 
 
 def _training(steps, kind):
@@ -57,7 +57,7 @@ def _training(steps, kind):
 def get_config():
   config = ml_collections.ConfigDict()
   config.seeds = (0,)  # Seeds: initial view, model initialisation, random choices.
-  config.strategies = NAMES  # All of them: random, farthest, activenerf, fisher, acp, ours x3.
+  config.strategies = TABLE1_NAMES  # random, farthest, activenerf, fisher, acp, ours x3.
   config.initial_view = -1  # Candidate index of the first view; < 0: a seeded random one.
   config.eval_views = (5, 10)  # Evaluate after this many views (paper: 5 and 10).
   config.max_views = 10  # Views at the end of a run (the largest of eval_views).
