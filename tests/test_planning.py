@@ -152,16 +152,22 @@ def _valid_camera(camera, sphere):
   assert (camera.width, camera.height) == (sphere.width, sphere.height)
 
 
+def _inputs(pool, config, model, views=(0, 3)):
+  """A strategy's inputs with `views` (candidate indices) as the training views."""
+  available = np.ones(len(pool.candidates), bool)
+  available[list(views)] = False
+  return strategies.Inputs(model, stack_cameras([pool.candidates.cameras[i] for i in views]),
+                           pool.candidates.cameras, available, pool.sphere, pool.bounds,
+                           pool.background, {}, config.max_views)
+
+
 @pytest.mark.parametrize("name", strategies.NAMES)
 def test_every_strategy_returns_a_valid_camera(name, models):
   pool = tiny_pool()
   config = tiny_config()
   strategy = strategies.make_strategy(name, config)
-  available = np.ones(len(pool.candidates), bool)
-  available[[0, 3]] = False
-  inputs = strategies.Inputs(models[strategy.model_kind], stack_cameras(
-      [pool.candidates.cameras[0], pool.candidates.cameras[3]]), pool.candidates.cameras,
-      available, pool.sphere, pool.bounds, pool.background, {}, config.max_views)
+  inputs = _inputs(pool, config, models[strategy.model_kind])
+  available = inputs.available
   choice = strategy.select(inputs, jax.random.PRNGKey(1))
   _valid_camera(choice.camera, pool.sphere)
   assert np.isfinite(choice.score)
@@ -181,14 +187,6 @@ def test_every_strategy_returns_a_valid_camera(name, models):
                                pool.candidates.cameras[choice.index].world_to_camera)
 
 
-def _opt_best_inputs(pool, config, model, views=(0, 3)):
-  available = np.ones(len(pool.candidates), bool)
-  available[list(views)] = False
-  return strategies.Inputs(model, stack_cameras([pool.candidates.cameras[i] for i in views]),
-                           pool.candidates.cameras, available, pool.sphere, pool.bounds,
-                           pool.background, {}, config.max_views)
-
-
 # "training": only the training view itself is available, where U is lowest, so the ascent
 # from it rises (2.5x on this tiny model) and a moved pose must be kept. "best": from the
 # highest-U candidate, as in the protocol (either branch). lr 0: the ascent stays at the
@@ -199,7 +197,7 @@ def test_opt_best_keeps_the_pose_with_the_highest_selection_u(models, start, sca
   config = tiny_config()
   config.strategy.optimize.lr *= scale_lr
   config.strategy.optimize.best_every = 5
-  inputs = _opt_best_inputs(pool, config, models["stochastic"], views=(0,))
+  inputs = _inputs(pool, config, models["stochastic"], views=(0,))
   if start == "training":
     inputs = inputs._replace(available=np.arange(len(pool.candidates)) == 0)
   choice = strategies.make_strategy("ours_opt_best", config).select(

@@ -301,15 +301,21 @@ def ours_opt_sel_strategy(cfg, opt_cfg) -> Strategy:
   sampler (the round model's sampler; "": the rounds' own).
   """
   def select(inputs, key):
-    scores, settings = _ours_scores(inputs, cfg)
-    start = _pick(inputs, scores, settings={"score": settings})
-    uv0 = poses.camera_to_uv(start.camera, inputs.sphere.center)
-    camera, value, info = _optimise(inputs._replace(settings=start.info["settings"]), uv0,
-                                    cfg, opt_cfg, key)
-    info.update(start_index=start.index, start_score=start.score, scores=scores)
+    _, camera, value, info = _optimise_from_selection(inputs, cfg, opt_cfg, key)
     return Choice(None, camera, value, info)
 
   return Strategy("ours_opt_sel", _opt_model_kind(opt_cfg), True, select)
+
+
+def _optimise_from_selection(inputs, cfg, opt_cfg, key):
+  """Ours (Sel.)'s choice, and the ascent from it: (start `Choice`, camera, U, info)."""
+  scores, settings = _ours_scores(inputs, cfg)
+  start = _pick(inputs, scores, settings={"score": settings})
+  uv0 = poses.camera_to_uv(start.camera, inputs.sphere.center)
+  camera, value, info = _optimise(inputs._replace(settings=start.info["settings"]), uv0,
+                                  cfg, opt_cfg, key)
+  info.update(start_index=start.index, start_score=start.score, scores=scores)
+  return start, camera, value, info
 
 
 def visited_steps(num_steps, every):
@@ -330,17 +336,12 @@ def ours_opt_best_strategy(cfg, opt_cfg) -> Strategy:
   highest: the start candidate itself when no visited pose beats it (ties keep the start).
   """
   def select(inputs, key):
-    scores, settings = _ours_scores(inputs, cfg)
-    start = _pick(inputs, scores, settings={"score": settings})
-    uv0 = poses.camera_to_uv(start.camera, inputs.sphere.center)
-    _, _, info = _optimise(inputs._replace(settings=start.info["settings"]), uv0, cfg,
-                           opt_cfg, key)
+    start, _, _, info = _optimise_from_selection(inputs, cfg, opt_cfg, key)
     steps = visited_steps(len(info["trajectory"]) - 1, int(opt_cfg.best_every))
     visited = poses.spherical_camera(jnp.asarray(info["trajectory"][steps]), inputs.sphere)
     u_visited, settings = _ours_scores(inputs._replace(settings=info["settings"]), cfg,
                                        visited)
-    info.update(start_index=start.index, start_score=start.score, scores=scores,
-                visited_steps=steps, u_visited=u_visited,
+    info.update(visited_steps=steps, u_visited=u_visited,
                 settings=dict(info["settings"], score=settings))
     best = int(np.argmax(u_visited))
     if not u_visited[best] > start.score:
