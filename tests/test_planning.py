@@ -405,6 +405,7 @@ def test_optimisation_summary_counts_rounds_and_kept_poses():
   assert set(summary) == {"ours_opt_sel", "ours_opt_best"}
   assert summary["ours_opt_sel"] == {"rounds": 4, "u_rose": 2, "u_end_over_start": 1.75}
   assert summary["ours_opt_best"] == {"rounds": 2, "u_rose": 1, "u_end_over_start": 1.75,
-                                      "kept_moved": 1, "kept_over_start": 1.25}
+                                      "kept_moved": 1, "kept_steps": {"0": 1, "20": 1},
+                                      "kept_over_start": 1.25}
   table = runner.optimisation_markdown(summary, {"ours_opt_sel": "O", "ours_opt_best": "B"})
   assert "| O | 4 | 2 | 1.750 | - | - |" in table and "| B | 2 | 1 | 1.750 | 1 | 1.250 |" in table

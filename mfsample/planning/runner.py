@@ -507,8 +507,9 @@ def optimisation_summary(records):
   Returns {strategy: {"rounds", "u_rose" (rounds where U at the ascent's end, as the ascent
   measures it: M = optimize.samples at its image size, beat U at its start),
   "u_end_over_start" (mean ratio), and for Ours (Opt. Best) "kept_moved" (rounds that kept a
-  visited pose, not the start) and "kept_over_start" (mean ratio of U as selection measures
-  it, kept pose over start; >= 1)}}. Strategies without an ascent are left out.
+  visited pose, not the start), "kept_steps" ({ascent step kept (0: the start): rounds}) and
+  "kept_over_start" (mean ratio of U as selection measures it, kept pose over start; >= 1)}}.
+  Strategies without an ascent are left out.
   """
   out = {}
   for rec in records:
@@ -522,6 +523,9 @@ def optimisation_summary(records):
     kept = [o for o in rounds if "kept_step" in o]
     if kept:
       e["kept_moved"] = e.get("kept_moved", 0) + sum(o["kept_step"] > 0 for o in kept)
+      steps = e.setdefault("kept_steps", {})
+      for o in kept:
+        steps[str(o["kept_step"])] = steps.get(str(o["kept_step"]), 0) + 1
       e.setdefault("_kept", []).extend(
           max(o["start_score"], *o["u_visited"]) / o["start_score"] for o in kept)
   for e in out.values():
