@@ -48,7 +48,9 @@ SHARED_WORKDIRS = {"camera_planning_results.py": "camera_planning.py",
                    "camera_planning_seeds8.py": "camera_planning.py",
                    "camera_planning_lego_seeds8.py": "camera_planning_lego.py",
                    "camera_planning_rounds2000_seeds16.py": "camera_planning_rounds2000.py",
-                   "camera_planning_rounds2000_best.py": "camera_planning_rounds2000.py"}
+                   "camera_planning_rounds2000_best.py": "camera_planning_rounds2000.py",
+                   "camera_planning_rounds2000_fresh.py": "camera_planning_rounds2000.py",
+                   "camera_planning_rounds2000_seeds24.py": "camera_planning_rounds2000.py"}
 
 
 def _planning_config(name):
