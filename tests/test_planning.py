@@ -310,6 +310,7 @@ def test_protocol_runs_end_to_end_and_resumes(tmp_path):
       assert len(set(rec["indices"])) == config.max_views  # no candidate twice
   table = (tmp_path / "table.md").read_text()
   assert "Ours (Opt. Rnd.)" in table and "PSNR↑ (3 views)" in table
+  assert "seconds per run" in table and set(results["run_seconds"]) == set(config.strategies)
   # The benchmarks that reuse a run check its pool against the config's.
   pool = tiny_pool()
   runner.check_run_matches(pool, results)
@@ -409,3 +410,16 @@ def test_optimisation_summary_counts_rounds_and_kept_poses():
                                       "kept_over_start": 1.25}
   table = runner.optimisation_markdown(summary, {"ours_opt_sel": "O", "ours_opt_best": "B"})
   assert "| O | 4 | 2 | 1.750 | - | - |" in table and "| B | 2 | 1 | 1.750 | 1 | 1.250 |" in table
+
+
+def test_seconds_summary_spreads_runs_and_rounds_after_the_first():
+  records = [{"strategy": "ours_sel", "seconds": 30.0, "round_seconds": [0.0, 4.0, 8.0]},
+             {"strategy": "ours_sel", "seconds": 10.0, "round_seconds": [0.0, 2.0]},
+             {"strategy": "ours_sel", "seconds": 20.0, "round_seconds": [0.0, 6.0]},
+             {"strategy": "farthest", "seconds": 5.0, "round_seconds": [0.0]}]
+  summary = runner.seconds_summary(records)
+  assert summary["ours_sel"] == {"runs": 3, "run": {"min": 10.0, "median": 20.0, "max": 30.0},
+                                 "round": {"min": 2.0, "median": 5.0, "max": 8.0}}
+  assert summary["farthest"] == {"runs": 1, "run": {"min": 5.0, "median": 5.0, "max": 5.0}}
+  table = runner.seconds_markdown(summary, {"ours_sel": "S", "farthest": "F"})
+  assert "| F | 1 | 5 / 5 / 5 | - |" in table and "| S | 3 | 10 / 20 / 30 | 2 / 5 / 8 |" in table

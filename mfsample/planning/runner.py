@@ -548,6 +548,42 @@ def optimisation_markdown(summary, labels, order=strategies.NAMES):
   return "\n".join(lines) + "\n"
 
 
+def seconds_summary(records):
+  """Wall-clock per run and per round, per strategy, as the run records hold them.
+
+  Returns {strategy: {"runs", "run": {"min", "median", "max"}, "round": {...}}}: "run" is a
+  run's `seconds` (its rounds, captures and final models), "round" every round after the
+  first (round 0 is the initial view, chosen without training). Recorded times include
+  whatever else the machine ran meanwhile.
+  """
+  runs, rounds = {}, {}
+  for rec in records:
+    runs.setdefault(rec["strategy"], []).append(rec["seconds"])
+    rounds.setdefault(rec["strategy"], []).extend(rec["round_seconds"][1:])
+
+  def spread(values):
+    v = np.asarray(values, np.float64)
+    return {"min": float(v.min()), "median": float(np.median(v)), "max": float(v.max())}
+
+  return {name: {"runs": len(values), "run": spread(values),
+                 **({"round": spread(rounds[name])} if rounds[name] else {})}
+          for name, values in runs.items()}
+
+
+def seconds_markdown(summary, labels, order=strategies.NAMES):
+  """`seconds_summary` as a markdown table (min / median / max, seconds)."""
+  def cell(e):
+    return f"{e['min']:.0f} / {e['median']:.0f} / {e['max']:.0f}"
+
+  lines = ["| Method | runs | seconds per run (min / median / max) | seconds per round "
+           "after the first (min / median / max) |", "|---|---:|---:|---:|"]
+  for name in [n for n in order if n in summary] + [n for n in summary if n not in order]:
+    e = summary[name]
+    round_cell = cell(e["round"]) if "round" in e else "-"
+    lines.append(f"| {labels[name]} | {e['runs']} | {cell(e['run'])} | {round_cell} |")
+  return "\n".join(lines) + "\n"
+
+
 # ------------------------------------------------------------------ the loop
 
 
@@ -708,6 +744,9 @@ def run_camera_planning(config, workdir):
     table += ("\nThe camera ascent of the optimising strategies, over all rounds and seeds "
               "(its U: M = strategy.optimize.samples at its image size; selection's U: as "
               "candidates are scored):\n\n" + optimisation_markdown(optimisation, labels))
+  run_seconds = seconds_summary(records)
+  table += ("\nWall-clock of the runs, as each run recorded it (other work on the machine "
+            "included):\n\n" + seconds_markdown(run_seconds, labels))
   with open(os.path.join(workdir, "table.md"), "w") as f:
     f.write(table)
   fig_seconds = 0.0
@@ -730,7 +769,7 @@ def run_camera_planning(config, workdir):
       "round_steps": int(config.rounds.steps), "warm_start": bool(config.rounds.warm_start),
       "final_steps": int(config.final_train.train.num_steps),
       "summary": summary, "paired_psnr": paired, "optimisation": optimisation,
-      "runs": records,
+      "run_seconds": run_seconds, "runs": records,
       "seconds": {"total_this_call": total, "pool": pool_seconds, "figures": fig_seconds,
                   "calls": calls},
   }
