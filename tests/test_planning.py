@@ -327,6 +327,12 @@ def test_protocol_runs_end_to_end_and_resumes(tmp_path):
   assert first["new_runs"] == ["random-seed0", "ours_opt_rnd-seed0"]
   assert first["seconds"] == results["seconds"]["total_this_call"]
   assert second == {"seconds": again["seconds"]["total_this_call"], "new_runs": []}
+  # A call whose runs are all new (another seed) still keeps the earlier calls.
+  config.seeds = (1,)
+  config.strategies = ("random",)
+  config.figures.enabled = False
+  third = runner.run_camera_planning(config, str(tmp_path))["seconds"]["calls"]
+  assert third[:2] == again["seconds"]["calls"] and third[2]["new_runs"] == ["random-seed1"]
   # Finished runs of another protocol are never mixed into one table.
   config.rounds.steps += 1
   with pytest.raises(ValueError, match="different config.*rounds"):

@@ -678,6 +678,7 @@ def run_camera_planning(config, workdir):
   t_start = time.perf_counter()
   os.makedirs(os.path.join(workdir, "runs"), exist_ok=True)
   _check_resumable(config, workdir)
+  had_runs = any(name.endswith(".json") for name in os.listdir(os.path.join(workdir, "runs")))
   with open(os.path.join(workdir, "config.json"), "w") as f:
     f.write(config.to_json_best_effort(indent=2))
   t0 = time.perf_counter()
@@ -758,9 +759,10 @@ def run_camera_planning(config, workdir):
     np.savez(os.path.join(workdir, "landscape.npz"), **land)
     figures.landscape_figure(land, os.path.join(workdir, "landscape.png"))
     fig_seconds = time.perf_counter() - t0
-  # A resumed workdir keeps the earlier calls' totals: its runs' cost is the sum of them.
-  resumed = len(new_runs) < len(records)
-  calls = _earlier_calls(workdir) if resumed else []
+  # A workdir that already held runs keeps the earlier calls' totals (its runs' cost is
+  # their sum), also when this call's seeds or strategies are all new; an empty one starts
+  # the list afresh, whatever a stale results.json beside it says.
+  calls = _earlier_calls(workdir) if had_runs else []
   total = time.perf_counter() - t_start
   calls.append({"seconds": total, "new_runs": new_runs})
   results = {
