@@ -429,13 +429,18 @@ def summarise(records, eval_views):
   return out
 
 
+def _in_order(keyed, order):
+  """The keys of `keyed`: those in `order` first, in its order, then the rest as they come."""
+  return [n for n in order if n in keyed] + [n for n in keyed if n not in order]
+
+
 def table_markdown(summary, eval_views, order=strategies.NAMES, title=None):
   """The paper's Table 1 layout: strategies x (PSNR, SSIM, LPIPS) at each view count."""
   head = ["Method"] + [f"{label}{arrow} ({n} views)" for n in eval_views
                        for _, label, arrow in METRICS]
   lines = [] if title is None else [title, ""]
   lines += ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-  for name in [n for n in order if n in summary] + [n for n in summary if n not in order]:
+  for name in _in_order(summary, order):
     s = summary[name]
     row = [s["label"]]
     for n in eval_views:
@@ -488,7 +493,7 @@ def paired_markdown(paired, labels, reference_label, eval_views, metric="psnr",
   head = ["Method"] + [f"Δ{label} vs {reference_label} ({n} views)" for n in eval_views]
   lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
   digits = _DIGITS[metric]
-  for name in [n for n in order if n in paired] + [n for n in paired if n not in order]:
+  for name in _in_order(paired, order):
     row = [labels[name]]
     for n in eval_views:
       e = paired[name].get(str(n))
@@ -577,7 +582,7 @@ def seconds_markdown(summary, labels, order=strategies.NAMES):
 
   lines = ["| Method | runs | seconds per run (min / median / max) | seconds per round "
            "after the first (min / median / max) |", "|---|---:|---:|---:|"]
-  for name in [n for n in order if n in summary] + [n for n in summary if n not in order]:
+  for name in _in_order(summary, order):
     e = summary[name]
     round_cell = cell(e["round"]) if "round" in e else "-"
     lines.append(f"| {labels[name]} | {e['runs']} | {cell(e['run'])} | {round_cell} |")
@@ -631,10 +636,15 @@ def _differences(old, new, prefix=""):
   return out
 
 
+def _holds_runs(workdir):
+  """Whether `workdir/runs` holds anything: finished runs of an earlier call."""
+  return bool(os.listdir(os.path.join(workdir, "runs")))
+
+
 def _check_resumable(config, workdir):
   """Refuses to add runs to a workdir whose finished runs used a different protocol."""
   path = os.path.join(workdir, "config.json")
-  if not os.path.exists(path) or not os.listdir(os.path.join(workdir, "runs")):
+  if not os.path.exists(path) or not _holds_runs(workdir):
     return
   with open(path) as f:
     old = _comparable_config(json.load(f))
@@ -678,7 +688,7 @@ def run_camera_planning(config, workdir):
   t_start = time.perf_counter()
   os.makedirs(os.path.join(workdir, "runs"), exist_ok=True)
   _check_resumable(config, workdir)
-  had_runs = any(name.endswith(".json") for name in os.listdir(os.path.join(workdir, "runs")))
+  had_runs = _holds_runs(workdir)
   with open(os.path.join(workdir, "config.json"), "w") as f:
     f.write(config.to_json_best_effort(indent=2))
   t0 = time.perf_counter()
