@@ -429,3 +429,29 @@ def test_seconds_summary_spreads_runs_and_rounds_after_the_first():
   assert summary["farthest"] == {"runs": 1, "run": {"min": 5.0, "median": 5.0, "max": 5.0}}
   table = runner.seconds_markdown(summary, {"ours_sel": "S", "farthest": "F"})
   assert "| F | 1 | 5 / 5 / 5 | - |" in table and "| S | 3 | 10 / 20 / 30 | 2 / 5 / 8 |" in table
+
+
+def _run_seconds_script():
+  import importlib.util
+  path = os.path.join(os.path.dirname(__file__), "..", "benchmarks", "run_seconds.py")
+  spec = importlib.util.spec_from_file_location("run_seconds", path)
+  module = importlib.util.module_from_spec(spec)
+  spec.loader.exec_module(module)
+  return module
+
+
+def test_run_seconds_tables_split_runs_by_seed_range():
+  script = _run_seconds_script()
+  assert script.seed_range("3:5") == range(3, 5)
+  for bad in ("3", "5:3", "a:b"):
+    with pytest.raises(ValueError, match="range"):
+      script.seed_range(bad)
+  records = [{"strategy": "ours_sel", "seed": s, "seconds": 10.0 * (s + 1),
+              "round_seconds": [0.0, float(s)]} for s in range(4)]
+  text = script.tables(records, [range(0, 2), range(2, 3), range(7, 9)])
+  first, rest = text.split("Seed 2:")
+  second, empty = rest.split("Seeds 7-8:")
+  assert first.startswith("Seeds 0-1:")
+  assert "| Ours (Sel.) | 2 | 10 / 15 / 20 | 0 / 0 / 1 |" in first
+  assert "| Ours (Sel.) | 1 | 30 / 30 / 30 | 2 / 2 / 2 |" in second
+  assert "no runs" in empty

@@ -757,7 +757,10 @@ def run_camera_planning(config, workdir):
               "candidates are scored):\n\n" + optimisation_markdown(optimisation, labels))
   run_seconds = seconds_summary(records)
   table += ("\nWall-clock of the runs, as each run recorded it (other work on the machine "
-            "included):\n\n" + seconds_markdown(run_seconds, labels))
+            "included; a round whose model another run of the same seed trained earlier in "
+            "the call, such as the one-view model the \"Ours\" variants share, comes from "
+            "the trainer's cache and takes seconds):\n\n"
+            + seconds_markdown(run_seconds, labels))
   with open(os.path.join(workdir, "table.md"), "w") as f:
     f.write(table)
   fig_seconds = 0.0
