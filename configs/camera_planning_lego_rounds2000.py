@@ -14,6 +14,8 @@ Fixed in advance:
   stopped early leaves seeds 0..k; the next call in the same workdir finishes them);
 - the outcomes: at 10 views, PSNR paired by seed, mean +- standard error and the count of
   seeds where Ours (Sel.) is better, of Ours (Sel.) - farthest point; the same at 5 views.
+- added while seed 0 was the only finished seed: the same outcomes with 2000-step final
+  models (`benchmarks/final_training.py --steps=2000`), as for the default scene.
 
 Farthest point trains no round model, so its views are those of the 400-step lego runs;
 it runs here so that the pairing is checked rather than assumed. FisherRF is left out for
