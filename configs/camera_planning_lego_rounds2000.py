@@ -20,7 +20,8 @@ Fixed in advance:
 Farthest point trains no round model, so its views are those of the 400-step lego runs;
 it runs here so that the pairing is checked rather than assumed. FisherRF is left out for
 time (it trains round models too; Ours (Sel.) is above it on lego already at 400-step
-rounds, +0.08 +- 0.05). A new protocol, so a workdir of its own:
+rounds, +0.08 +- 0.05). A new protocol, so a workdir of its own (on two CPU cores the
+call took 78 minutes; the outcomes are in the README's lego section):
 
   python experiments/camera_planning.py --config=configs/camera_planning_lego_rounds2000.py \
       --workdir=workdirs/camera_planning_lego_rounds2000
