@@ -47,6 +47,8 @@ PLANNING_CONFIGS = sorted(p.name for p in (ROOT / "configs").glob("camera_planni
 SHARED_WORKDIRS = {"camera_planning_results.py": "camera_planning.py",
                    "camera_planning_seeds8.py": "camera_planning.py",
                    "camera_planning_lego_seeds8.py": "camera_planning_lego.py",
+                   "camera_planning_lego_rounds2000_seeds16.py":
+                       "camera_planning_lego_rounds2000.py",
                    "camera_planning_rounds2000_seeds16.py": "camera_planning_rounds2000.py",
                    "camera_planning_rounds2000_best.py": "camera_planning_rounds2000.py",
                    "camera_planning_rounds2000_fresh.py": "camera_planning_rounds2000.py",
