@@ -16,7 +16,7 @@ import json
 
 from absl import app, flags
 
-from mfsample.planning import runner, strategies
+from mfsample.planning import runner
 
 _RESULTS = flags.DEFINE_string(
     "results", "results/camera_planning_rounds2000_best/results.json", "results.json of the run.")
@@ -37,7 +37,7 @@ def seed_range(text):
 
 def tables(records, ranges, names=()):
   """Markdown: one `runner.seconds_markdown` table per seed range (of the runs it holds)."""
-  labels = {name: strategies.LABELS.get(name, name) for name in {r["strategy"] for r in records}}
+  labels = {r["strategy"]: r["label"] for r in records}  # As the runner labels its tables.
   out = []
   for seeds in ranges:
     chosen = [r for r in records if r["seed"] in seeds and (not names or r["strategy"] in names)]

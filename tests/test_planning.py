@@ -446,7 +446,7 @@ def test_run_seconds_tables_split_runs_by_seed_range():
   for bad in ("3", "5:3", "a:b"):
     with pytest.raises(ValueError, match="range"):
       script.seed_range(bad)
-  records = [{"strategy": "ours_sel", "seed": s, "seconds": 10.0 * (s + 1),
+  records = [{"strategy": "ours_sel", "label": "Ours (Sel.)", "seed": s, "seconds": 10.0 * (s + 1),
               "round_seconds": [0.0, float(s)]} for s in range(4)]
   text = script.tables(records, [range(0, 2), range(2, 3), range(7, 9)])
   first, rest = text.split("Seed 2:")
