@@ -15,7 +15,16 @@ from planning_testlib import random_model, tiny_config, tiny_pool, trained_one_v
 
 from mfsample import RenderSettings
 from mfsample import uncertainty as unc
-from mfsample.planning import acp, fisher, optimize, poses, runner, strategies, variance
+from mfsample.planning import (
+  acp,
+  by_seeds,
+  fisher,
+  optimize,
+  poses,
+  runner,
+  strategies,
+  variance,
+)
 from mfsample.planning.pool import stack_cameras
 from mfsample.scenes import get_scene
 
@@ -431,27 +440,39 @@ def test_seconds_summary_spreads_runs_and_rounds_after_the_first():
   assert "| F | 1 | 5 / 5 / 5 | - |" in table and "| S | 3 | 10 / 20 / 30 | 2 / 5 / 8 |" in table
 
 
-def _run_seconds_script():
-  import importlib.util
-  path = os.path.join(os.path.dirname(__file__), "..", "benchmarks", "run_seconds.py")
-  spec = importlib.util.spec_from_file_location("run_seconds", path)
-  module = importlib.util.module_from_spec(spec)
-  spec.loader.exec_module(module)
-  return module
-
-
 def test_run_seconds_tables_split_runs_by_seed_range():
-  script = _run_seconds_script()
-  assert script.seed_range("3:5") == range(3, 5)
+  assert by_seeds.seed_range("3:5") == range(3, 5)
   for bad in ("3", "5:3", "a:b"):
     with pytest.raises(ValueError, match="range"):
-      script.seed_range(bad)
+      by_seeds.seed_range(bad)
   records = [{"strategy": "ours_sel", "label": "Ours (Sel.)", "seed": s, "seconds": 10.0 * (s + 1),
               "round_seconds": [0.0, float(s)]} for s in range(4)]
-  text = script.tables(records, [range(0, 2), range(2, 3), range(7, 9)])
+  text = by_seeds.seconds_tables(records, [range(0, 2), range(2, 3), range(7, 9)])
   first, rest = text.split("Seed 2:")
   second, empty = rest.split("Seeds 7-8:")
   assert first.startswith("Seeds 0-1:")
   assert "| Ours (Sel.) | 2 | 10 / 15 / 20 | 0 / 0 / 1 |" in first
   assert "| Ours (Sel.) | 1 | 30 / 30 / 30 | 2 / 2 / 2 |" in second
   assert "no runs" in empty
+
+
+def test_paired_gaps_pair_by_seed_range_from_runs_and_final_rows():
+  # Final models: only those trained from the run's own seed, at the chosen length.
+  rows = [{"strategy": s, "label": s.upper(), "seed": seed, "views": 10, "steps": steps,
+           "train_seed": seed + offset, "psnr": 20.0 + seed * (s == "b") + offset + steps / 1e4,
+           "ssim": 0.5}
+          for s in ("a", "b") for seed in range(4) for steps in (600, 2000) for offset in (0, 1000)]
+  with pytest.raises(ValueError, match="choose one"):
+    by_seeds.records_from_final_rows(rows)
+  with pytest.raises(ValueError, match="no final models of 100"):
+    by_seeds.records_from_final_rows(rows, 100)
+  records = by_seeds.records_from_final_rows(rows, 2000)
+  assert len(records) == 8
+  assert {r["metrics"]["10"]["psnr"] for r in records if r["strategy"] == "a"} == {20.2}
+  # b - a = seed: seeds 1-2 give +1.5 ± 0.5, better in 2 of 2; seed 0 alone has no error bar.
+  text = by_seeds.paired_tables(records, [range(1, 3), range(0, 1)], ["a"], [10])
+  pair, alone = text.split("Seed 0,")
+  assert pair.startswith("Seeds 1-2, paired with A")
+  assert "| B | +1.50 ± 0.50 (better in 2/2) |" in pair
+  assert "| B | +0.00 (better in 0/1) |" in alone
+  assert "no seeds" in by_seeds.paired_tables(records, [range(7, 9)], ["a"], [10])

@@ -5,6 +5,7 @@
 * `strategies`: random, farthest point, ActiveNeRF-style variance, FisherRF, ACP and the
   three variants of ours, behind one interface.
 * `runner`: the protocol as pure steps and a thin, resumable loop (`run_camera_planning`).
+* `by_seeds`: the runner's tables over a range of a run's seeds (or of its final models).
 """
 
 from mfsample.planning.optimize import (

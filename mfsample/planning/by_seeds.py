@@ -1,0 +1,82 @@
+"""Reports of a part of a planning run's seeds.
+
+The runner's `table.md` covers all the seeds of a workdir. When seeds were added by a later
+call (a pre-registered one names its outcomes over the new seeds and over all of them), or
+the machine was slower for some, a range of seeds at a time says more. These build the
+runner's own tables (`runner.seconds_markdown`, `runner.paired_markdown`) per range
+`a:b` (seeds a .. b-1), from a run's records or from the rows that
+`benchmarks/final_training.py` writes.
+"""
+
+from mfsample.planning import runner
+
+
+def seed_range(text):
+  """'a:b' -> range(a, b), with a clear error for anything else."""
+  try:
+    first, end = (int(part) for part in text.split(":"))
+  except ValueError:
+    raise ValueError(f"a seed range is 'a:b' (seeds a .. b-1), got {text!r}") from None
+  if end <= first:
+    raise ValueError(f"seed range {text!r} is empty")
+  return range(first, end)
+
+
+def _title(seeds):
+  return f"Seed {seeds.start}" if len(seeds) == 1 else f"Seeds {seeds.start}-{seeds.stop - 1}"
+
+
+def _labels(records):
+  return {r["strategy"]: r["label"] for r in records}  # As the runner labels its tables.
+
+
+def seconds_tables(records, ranges, names=()):
+  """Markdown: one `runner.seconds_markdown` table per seed range (of the runs it holds)."""
+  labels = _labels(records)
+  out = []
+  for seeds in ranges:
+    chosen = [r for r in records if r["seed"] in seeds and (not names or r["strategy"] in names)]
+    if not chosen:
+      out.append(f"{_title(seeds)}: no runs.\n")
+      continue
+    out.append(f"{_title(seeds)}:\n\n"
+               + runner.seconds_markdown(runner.seconds_summary(chosen), labels))
+  return "\n".join(out)
+
+
+def paired_tables(records, ranges, references, views, metric="psnr"):
+  """Markdown: per seed range and reference, the paired differences of the others to it."""
+  labels = _labels(records)
+  out = []
+  for seeds in ranges:
+    chosen = [r for r in records if r["seed"] in seeds]
+    for reference in references:
+      paired = runner.paired_differences(chosen, views, reference, metric)
+      if not paired:
+        out.append(f"{_title(seeds)}: no seeds with {reference} and another strategy.\n")
+        continue
+      out.append(f"{_title(seeds)}, paired with {labels[reference]} (mean ± standard error):"
+                 "\n\n" + runner.paired_markdown(paired, labels, labels[reference], views,
+                                                 metric))
+  return "\n".join(out)
+
+
+def records_from_final_rows(rows, steps=None):
+  """Run-style records ({strategy, label, seed, metrics: {n: {psnr, ssim}}}) from the rows of
+  final_training.py at `steps` (None: the one length the rows hold), one model per view set:
+  the one trained from the run's own seed, as the protocol trains it."""
+  lengths = sorted({r["steps"] for r in rows})
+  if steps is None:
+    if len(lengths) != 1:
+      raise ValueError(f"the rows hold final models of {lengths} steps: choose one")
+    steps = lengths[0]
+  if steps not in lengths:
+    raise ValueError(f"no final models of {steps} steps; the rows hold {lengths}")
+  records = {}
+  for r in rows:
+    if r["steps"] != steps or r["train_seed"] != r["seed"]:
+      continue
+    rec = records.setdefault((r["strategy"], r["seed"]), {
+        "strategy": r["strategy"], "label": r["label"], "seed": r["seed"], "metrics": {}})
+    rec["metrics"][str(r["views"])] = {"psnr": r["psnr"], "ssim": r["ssim"]}
+  return list(records.values())
