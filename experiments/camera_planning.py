@@ -4,7 +4,9 @@
       --workdir=workdirs/camera_planning
 
 Writes results.json, table.md (paper Table 1 layout), cameras.png and landscape.png to the
-workdir. Re-running with the same workdir skips the (strategy, seed) runs already done.
+workdir. Re-running with the same workdir skips the (strategy, seed) runs already done;
+`--restore_from=results/<name>` first copies a results directory's finished runs into the
+workdir (e.g. a committed run, on a machine that lacks its workdir), so only the rest run.
 """
 
 import sys
@@ -16,17 +18,24 @@ from ml_collections import config_flags
 # The config files import each other as `configs.*`; configs/ is not an installed package.
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from mfsample.planning import run_camera_planning
+from mfsample.planning import restore_runs, run_camera_planning
 
 _CONFIG = config_flags.DEFINE_config_file("config", None, "Planning config file.",
                                           lock_config=True)
 _WORKDIR = flags.DEFINE_string("workdir", None, "Output directory.")
+_RESTORE_FROM = flags.DEFINE_string(
+    "restore_from", None,
+    "A results directory (results.json + config.json) whose finished runs to copy into the "
+    "workdir before running; runs the workdir already has are kept.")
 flags.mark_flags_as_required(["config", "workdir"])
 
 
 def main(argv):
   if len(argv) > 1:
     raise app.UsageError(f"Unexpected arguments: {argv[1:]}")
+  if _RESTORE_FROM.value:
+    restored = restore_runs(_RESTORE_FROM.value, _WORKDIR.value)
+    print(f"restored {len(restored)} run(s) from {_RESTORE_FROM.value}")
   results = run_camera_planning(_CONFIG.value, _WORKDIR.value)
   print(open(f"{_WORKDIR.value}/table.md").read())
   seconds = results["seconds"]

@@ -336,16 +336,30 @@ def test_protocol_runs_end_to_end_and_resumes(tmp_path):
   assert first["new_runs"] == ["random-seed0", "ours_opt_rnd-seed0"]
   assert first["seconds"] == results["seconds"]["total_this_call"]
   assert second == {"seconds": again["seconds"]["total_this_call"], "new_runs": []}
+  # A results directory's runs restored into an empty workdir are loaded, not rerun.
+  config.figures.enabled = False
+  restored_dir = str(tmp_path / "restored")
+  assert runner.restore_runs(str(tmp_path), restored_dir) == first["new_runs"]
+  restored = runner.run_camera_planning(config, restored_dir)
+  assert restored["runs"] == again["runs"]
+  assert restored["seconds"]["calls"][:2] == again["seconds"]["calls"]
+  assert restored["seconds"]["calls"][2]["new_runs"] == []
+  assert runner.restore_runs(str(tmp_path), restored_dir) == []  # nothing left to restore
+  with pytest.raises(FileNotFoundError, match="results.json does not exist"):
+    runner.restore_runs(str(tmp_path / "runs"), restored_dir)
   # A call whose runs are all new (another seed) still keeps the earlier calls.
   config.seeds = (1,)
   config.strategies = ("random",)
-  config.figures.enabled = False
   third = runner.run_camera_planning(config, str(tmp_path))["seconds"]["calls"]
   assert third[:2] == again["seconds"]["calls"] and third[2]["new_runs"] == ["random-seed1"]
   # Finished runs of another protocol are never mixed into one table.
   config.rounds.steps += 1
   with pytest.raises(ValueError, match="different config.*rounds"):
     runner.run_camera_planning(config, str(tmp_path))
+  # ... nor restored beside runs of another protocol.
+  (tmp_path / "config.json").write_text(config.to_json_best_effort())
+  with pytest.raises(ValueError, match=r"different config than .*differences: .*rounds\.steps"):
+    runner.restore_runs(restored_dir, str(tmp_path))
 
 
 def test_resume_guard_reads_a_field_added_later_as_the_old_behaviour(tmp_path):

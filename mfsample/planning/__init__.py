@@ -4,7 +4,8 @@
 * `optimize`: Adam on -U w.r.t. the camera (the authors' recipe, every number a setting).
 * `strategies`: random, farthest point, ActiveNeRF-style variance, FisherRF, ACP and the
   three variants of ours, behind one interface.
-* `runner`: the protocol as pure steps and a thin, resumable loop (`run_camera_planning`).
+* `runner`: the protocol as pure steps and a thin, resumable loop (`run_camera_planning`;
+  `restore_runs` seeds a workdir with a results directory's finished runs).
 * `by_seeds`: the runner's tables over a range of a run's seeds (or of its final models).
 """
 
@@ -22,11 +23,12 @@ from mfsample.planning.poses import (
                                         se3_exp,
                                         spherical_camera,
 )
-from mfsample.planning.runner import run_camera_planning
+from mfsample.planning.runner import restore_runs, run_camera_planning
 from mfsample.planning.strategies import NAMES, Choice, Inputs, Strategy, make_strategy
 
 __all__ = [
     "NAMES", "Choice", "Inputs", "OptimizeResult", "OptimizeSettings", "SphereSpec",
     "Strategy", "camera_to_uv", "make_strategy", "optimize_se3", "optimize_spherical",
-    "perturb_camera", "project_uv", "run_camera_planning", "se3_exp", "spherical_camera",
+    "perturb_camera", "project_uv", "restore_runs", "run_camera_planning", "se3_exp",
+    "spherical_camera",
 ]

@@ -26,6 +26,7 @@ import functools
 import hashlib
 import json
 import os
+import shutil
 import time
 from typing import NamedTuple
 
@@ -670,6 +671,48 @@ def _earlier_calls(workdir):
   if "calls" in seconds:
     return list(seconds["calls"])
   return [{"seconds": float(seconds["total_this_call"]), "new_runs": None}]
+
+
+def restore_runs(results_dir, workdir):
+  """Seeds `workdir` with the finished runs of a results directory (e.g. a committed one).
+
+  Writes `runs/<strategy>-seed<seed>.json` for every run in `results_dir/results.json`
+  that the workdir lacks, and, where the workdir has none yet, its `config.json` and
+  `results.json` (so the restored runs' wall-clock stays in `seconds.calls`). A later
+  `run_camera_planning` on the workdir then loads those runs instead of recomputing them,
+  and refuses, as for any resumed workdir, a config whose protocol differs from theirs.
+
+  Returns:
+    the names (`<strategy>-seed<seed>`) of the runs written.
+  """
+  paths = {name: os.path.join(results_dir, name) for name in ("results.json", "config.json")}
+  for path in paths.values():
+    if not os.path.exists(path):
+      raise FileNotFoundError(f"cannot restore runs: {path} does not exist")
+  with open(paths["config.json"]) as f:
+    theirs = _comparable_config(json.load(f))
+  ours_path = os.path.join(workdir, "config.json")
+  os.makedirs(os.path.join(workdir, "runs"), exist_ok=True)
+  if os.path.exists(ours_path) and _holds_runs(workdir):
+    with open(ours_path) as f:
+      ours = _comparable_config(json.load(f))
+    if ours != theirs:
+      raise ValueError(
+          f"{workdir} holds runs made with a different config than {results_dir}'s "
+          f"(differences: {', '.join(_differences(theirs, ours))})")
+  with open(paths["results.json"]) as f:
+    results = json.load(f)
+  written = []
+  for record in results["runs"]:
+    name = f"{record['strategy']}-seed{record['seed']}"
+    path = os.path.join(workdir, "runs", f"{name}.json")
+    if not os.path.exists(path):
+      write_json(path, record, indent=1)
+      written.append(name)
+  for name, path in paths.items():
+    if not os.path.exists(os.path.join(workdir, name)):
+      shutil.copyfile(path, os.path.join(workdir, name))
+  return written
 
 
 def run_camera_planning(config, workdir):
