@@ -114,3 +114,20 @@ COMMITTED_RESULTS = {"camera_planning_default": "camera_planning_results.py",
 def test_committed_results_were_made_with_their_config(results, name):
   recorded = json.loads((ROOT / "results" / results / "config.json").read_text())
   assert runner._differences(runner._comparable_config(recorded), _comparable(name)) == []
+
+
+# Farthest point trains no round model, so the round length cannot change its views or
+# its final models: the README pairs the 2000-step runs with it on that ground.
+@pytest.mark.parametrize("short,long", [("camera_planning_seeds8", "camera_planning_rounds2000"),
+                                        ("camera_planning_lego_seeds8",
+                                         "camera_planning_lego_rounds2000")])
+def test_farthest_point_runs_do_not_depend_on_the_round_length(short, long):
+  def farthest(name):
+    results = json.loads((ROOT / "results" / name / "results.json").read_text())
+    return results["round_steps"], {r["seed"]: r for r in results["runs"]
+                                    if r["strategy"] == "farthest"}
+  (short_steps, short_runs), (long_steps, long_runs) = farthest(short), farthest(long)
+  assert short_steps < long_steps and set(short_runs) == set(long_runs)
+  for seed, run in short_runs.items():
+    assert run["indices"] == long_runs[seed]["indices"], seed
+    assert run["metrics"] == long_runs[seed]["metrics"], seed
