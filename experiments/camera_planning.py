@@ -5,8 +5,9 @@
 
 Writes results.json, table.md (paper Table 1 layout), cameras.png and landscape.png to the
 workdir. Re-running with the same workdir skips the (strategy, seed) runs already done;
-`--restore_from=results/<name>` first copies a results directory's finished runs into the
-workdir (e.g. a committed run, on a machine that lacks its workdir), so only the rest run.
+`--restore_from=results/<name>[,...]` first copies the finished runs of results directories
+into the workdir (e.g. committed runs, on a machine that lacks their workdir), so only the
+rest run.
 """
 
 import sys
@@ -23,19 +24,19 @@ from mfsample.planning import restore_runs, run_camera_planning
 _CONFIG = config_flags.DEFINE_config_file("config", None, "Planning config file.",
                                           lock_config=True)
 _WORKDIR = flags.DEFINE_string("workdir", None, "Output directory.")
-_RESTORE_FROM = flags.DEFINE_string(
-    "restore_from", None,
-    "A results directory (results.json + config.json) whose finished runs to copy into the "
-    "workdir before running; runs the workdir already has are kept.")
+_RESTORE_FROM = flags.DEFINE_list(
+    "restore_from", [],
+    "Results directories (results.json + config.json) whose finished runs to copy into the "
+    "workdir before running, in order; runs the workdir already has are kept.")
 flags.mark_flags_as_required(["config", "workdir"])
 
 
 def main(argv):
   if len(argv) > 1:
     raise app.UsageError(f"Unexpected arguments: {argv[1:]}")
-  if _RESTORE_FROM.value:
-    restored = restore_runs(_RESTORE_FROM.value, _WORKDIR.value)
-    print(f"restored {len(restored)} run(s) from {_RESTORE_FROM.value}")
+  for results_dir in _RESTORE_FROM.value:
+    restored = restore_runs(results_dir, _WORKDIR.value)
+    print(f"restored {len(restored)} run(s) from {results_dir}")
   results = run_camera_planning(_CONFIG.value, _WORKDIR.value)
   print(open(f"{_WORKDIR.value}/table.md").read())
   seconds = results["seconds"]

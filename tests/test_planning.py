@@ -352,6 +352,10 @@ def test_protocol_runs_end_to_end_and_resumes(tmp_path):
   config.strategies = ("random",)
   third = runner.run_camera_planning(config, str(tmp_path))["seconds"]["calls"]
   assert third[:2] == again["seconds"]["calls"] and third[2]["new_runs"] == ["random-seed1"]
+  # Restoring again adds the new run, and of the calls only the one the workdir lacks.
+  assert runner.restore_runs(str(tmp_path), restored_dir) == ["random-seed1"]
+  merged = json.loads((tmp_path / "restored" / "results.json").read_text())["seconds"]["calls"]
+  assert merged == restored["seconds"]["calls"] + third[2:]
   # Finished runs of another protocol are never mixed into one table.
   config.rounds.steps += 1
   with pytest.raises(ValueError, match="different config.*rounds"):

@@ -678,7 +678,8 @@ def restore_runs(results_dir, workdir):
 
   Writes `runs/<strategy>-seed<seed>.json` for every run in `results_dir/results.json`
   that the workdir lacks, and, where the workdir has none yet, its `config.json` and
-  `results.json` (so the restored runs' wall-clock stays in `seconds.calls`). A later
+  `results.json`, so the restored runs' wall-clock stays in `seconds.calls` (restoring
+  from a second directory adds its calls that the workdir's list lacks). A later
   `run_camera_planning` on the workdir then loads those runs instead of recomputing them,
   and refuses, as for any resumed workdir, a config whose protocol differs from theirs.
 
@@ -712,6 +713,13 @@ def restore_runs(results_dir, workdir):
   for name, path in paths.items():
     if not os.path.exists(os.path.join(workdir, name)):
       shutil.copyfile(path, os.path.join(workdir, name))
+    elif name == "results.json" and written:
+      with open(os.path.join(workdir, name)) as f:
+        ours_results = json.load(f)
+      calls = _earlier_calls(workdir)
+      calls += [c for c in _earlier_calls(results_dir) if c not in calls]
+      ours_results.setdefault("seconds", {})["calls"] = calls
+      write_json(os.path.join(workdir, name), ours_results, indent=1)
   return written
 
 
