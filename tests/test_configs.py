@@ -109,7 +109,9 @@ COMMITTED_RESULTS = {"camera_planning_default": "camera_planning_results.py",
                      "camera_planning_rounds2000_best": "camera_planning_rounds2000_best.py",
                      "camera_planning_rounds2000_fresh": "camera_planning_rounds2000_fresh.py",
                      "camera_planning_rounds2000_seeds24":
-                         "camera_planning_rounds2000_seeds24.py"}
+                         "camera_planning_rounds2000_seeds24.py",
+                     "camera_planning_rounds2000_opt_sel_seeds24":
+                         "camera_planning_rounds2000_opt_sel_seeds24.py"}
 
 
 @pytest.mark.parametrize("results,name", sorted(COMMITTED_RESULTS.items()))
