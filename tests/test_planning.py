@@ -339,7 +339,11 @@ def test_protocol_runs_end_to_end_and_resumes(tmp_path):
   # A results directory's runs restored into an empty workdir are loaded, not rerun.
   config.figures.enabled = False
   restored_dir = str(tmp_path / "restored")
+  os.makedirs(restored_dir)
+  (tmp_path / "restored" / "config.json").write_text("{}")  # stale, describing no runs
   assert runner.restore_runs(str(tmp_path), restored_dir) == first["new_runs"]
+  assert (tmp_path / "restored" / "config.json").read_text() == (
+      tmp_path / "config.json").read_text()
   restored = runner.run_camera_planning(config, restored_dir)
   assert restored["runs"] == again["runs"]
   assert restored["seconds"]["calls"][:2] == again["seconds"]["calls"]

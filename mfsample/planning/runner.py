@@ -677,9 +677,10 @@ def restore_runs(results_dir, workdir):
   """Seeds `workdir` with the finished runs of a results directory (e.g. a committed one).
 
   Writes `runs/<strategy>-seed<seed>.json` for every run in `results_dir/results.json`
-  that the workdir lacks, and, where the workdir has none yet, its `config.json` and
-  `results.json`, so the restored runs' wall-clock stays in `seconds.calls` (restoring
-  from a second directory adds its calls that the workdir's list lacks). A later
+  that the workdir lacks, and, where the workdir holds no runs yet, its `config.json` and
+  `results.json` (replacing stale ones), so the restored runs' wall-clock stays in
+  `seconds.calls` (restoring from a second directory adds its calls that the workdir's
+  list lacks). A later
   `run_camera_planning` on the workdir then loads those runs instead of recomputing them,
   and refuses, as for any resumed workdir, a config whose protocol differs from theirs.
 
@@ -694,7 +695,8 @@ def restore_runs(results_dir, workdir):
     theirs = _comparable_config(json.load(f))
   ours_path = os.path.join(workdir, "config.json")
   os.makedirs(os.path.join(workdir, "runs"), exist_ok=True)
-  if os.path.exists(ours_path) and _holds_runs(workdir):
+  had_runs = _holds_runs(workdir)
+  if os.path.exists(ours_path) and had_runs:
     with open(ours_path) as f:
       ours = _comparable_config(json.load(f))
     if ours != theirs:
@@ -711,7 +713,8 @@ def restore_runs(results_dir, workdir):
       write_json(path, record, indent=1)
       written.append(name)
   for name, path in paths.items():
-    if not os.path.exists(os.path.join(workdir, name)):
+    # A workdir without runs has nothing its own config.json or results.json describes.
+    if not had_runs or not os.path.exists(os.path.join(workdir, name)):
       shutil.copyfile(path, os.path.join(workdir, name))
     elif name == "results.json" and written:
       with open(os.path.join(workdir, name)) as f:
