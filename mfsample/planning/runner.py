@@ -642,19 +642,28 @@ def _holds_runs(workdir):
   return bool(os.listdir(os.path.join(workdir, "runs")))
 
 
-def _check_resumable(config, workdir):
-  """Refuses to add runs to a workdir whose finished runs used a different protocol."""
+def _run_name(strategy, seed):
+  """A run's name in `runs/<name>.json` and in `seconds.calls[*].new_runs`."""
+  return f"{strategy}-seed{seed}"
+
+
+def _check_same_protocol(workdir, config_dict, than="", advice=""):
+  """Refuses `config_dict` (a config as JSON) where `workdir`'s finished runs used another."""
   path = os.path.join(workdir, "config.json")
   if not os.path.exists(path) or not _holds_runs(workdir):
     return
   with open(path) as f:
     old = _comparable_config(json.load(f))
-  new = _comparable_config(json.loads(config.to_json_best_effort()))
+  new = _comparable_config(config_dict)
   if old != new:
-    raise ValueError(
-        f"{workdir} holds runs made with a different config (differences: "
-        f"{', '.join(_differences(old, new))}); use a new --workdir, or remove "
-        f"{workdir}/runs to redo them.")
+    raise ValueError(f"{workdir} holds runs made with a different config{than} (differences: "
+                     f"{', '.join(_differences(old, new))}){advice}")
+
+
+def _check_resumable(config, workdir):
+  """Refuses to add runs to a workdir whose finished runs used a different protocol."""
+  _check_same_protocol(workdir, json.loads(config.to_json_best_effort()),
+                       advice=f"; use a new --workdir, or remove {workdir}/runs to redo them.")
 
 
 def _earlier_calls(workdir):
@@ -680,9 +689,9 @@ def restore_runs(results_dir, workdir):
   that the workdir lacks, and, where the workdir holds no runs yet, its `config.json` and
   `results.json` (replacing stale ones), so the restored runs' wall-clock stays in
   `seconds.calls` (restoring from a second directory adds its calls that the workdir's
-  list lacks). A later
-  `run_camera_planning` on the workdir then loads those runs instead of recomputing them,
-  and refuses, as for any resumed workdir, a config whose protocol differs from theirs.
+  list lacks). A later `run_camera_planning` on the workdir then loads those runs instead
+  of recomputing them, and refuses, as for any resumed workdir, a config whose protocol
+  differs from theirs.
 
   Returns:
     the names (`<strategy>-seed<seed>`) of the runs written.
@@ -691,23 +700,15 @@ def restore_runs(results_dir, workdir):
   for path in paths.values():
     if not os.path.exists(path):
       raise FileNotFoundError(f"cannot restore runs: {path} does not exist")
-  with open(paths["config.json"]) as f:
-    theirs = _comparable_config(json.load(f))
-  ours_path = os.path.join(workdir, "config.json")
   os.makedirs(os.path.join(workdir, "runs"), exist_ok=True)
   had_runs = _holds_runs(workdir)
-  if os.path.exists(ours_path) and had_runs:
-    with open(ours_path) as f:
-      ours = _comparable_config(json.load(f))
-    if ours != theirs:
-      raise ValueError(
-          f"{workdir} holds runs made with a different config than {results_dir}'s "
-          f"(differences: {', '.join(_differences(theirs, ours))})")
+  with open(paths["config.json"]) as f:
+    _check_same_protocol(workdir, json.load(f), than=f" than {results_dir}'s")
   with open(paths["results.json"]) as f:
     results = json.load(f)
   written = []
   for record in results["runs"]:
-    name = f"{record['strategy']}-seed{record['seed']}"
+    name = _run_name(record["strategy"], record["seed"])
     path = os.path.join(workdir, "runs", f"{name}.json")
     if not os.path.exists(path):
       write_json(path, record, indent=1)
@@ -767,7 +768,7 @@ def run_camera_planning(config, workdir):
   bar = tqdm(total=len(todo) * (rounds + len(eval_views)), desc="camera planning",
              disable=not config.progress, dynamic_ncols=True)
   for seed, name in todo:
-    path = os.path.join(workdir, "runs", f"{name}-seed{seed}.json")
+    path = os.path.join(workdir, "runs", f"{_run_name(name, seed)}.json")
     if os.path.exists(path):
       with open(path) as f:
         records.append(json.load(f))
@@ -788,7 +789,7 @@ def run_camera_planning(config, workdir):
     record = run_record(strategy, seed, selected, metrics, time.perf_counter() - t_run, pool)
     write_json(path, record, indent=1)
     records.append(record)
-    new_runs.append(f"{name}-seed{seed}")
+    new_runs.append(_run_name(name, seed))
   bar.close()
 
   summary = summarise(records, eval_views)
