@@ -269,6 +269,11 @@ def main(argv):
                  else "")
               + f", {sum(seconds) / 60:.0f} min as recorded per row "
               f"({np.mean(seconds):.0f} s each)")
+  # The models this file's own calls trained, i.e. the cost of --out beyond what it reused.
+  own = [r["seconds"] for r in trained if "reused_from" not in r]
+  if own:
+    print(f"trained for {_OUT.value}: {len(own)} models, {sum(own) / 60:.0f} min as "
+          f"recorded per row ({min(own):.0f}-{max(own):.0f} s each)")
   write_json(_OUT.value, {
       "header": header, "inits": _INITS.value, "rows": rows,
       "max_reproduction_error_db": max(reproduced) if reproduced else None,
