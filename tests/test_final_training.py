@@ -1,0 +1,80 @@
+"""`benchmarks/final_training.py` end to end on a tiny planning run (a subprocess: absl flags).
+
+The README's longer-final-training figures come from this script, so what its docstring
+promises is checked here: the first initialisation at the run's own final length reproduces
+the run's metrics (it is the same protocol), a second call on the same --out trains nothing,
+and --reuse_rows_from takes another file's rows instead of training them again.
+"""
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from planning_testlib import tiny_config
+
+from mfsample.planning import runner
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def _final_training(*args):
+  env = {**os.environ, "PYTHONPATH": str(REPO)}
+  proc = subprocess.run(
+      [sys.executable, "benchmarks/final_training.py", "--config=configs/camera_planning_tiny.py",
+       *args], cwd=REPO, env=env, capture_output=True, text=True, timeout=600)
+  assert proc.returncode == 0, proc.stderr[-3000:]
+  return proc.stdout
+
+
+@pytest.fixture(scope="module")
+def tiny_run(tmp_path_factory):
+  """Two strategies that train no round model (cheap), one seed, the tiny protocol."""
+  workdir = tmp_path_factory.mktemp("run")
+  config = tiny_config()
+  config.strategies = ("random", "farthest")
+  config.figures.enabled = False
+  runner.run_camera_planning(config, str(workdir))
+  return workdir / "results.json"
+
+
+def test_final_training_reproduces_the_run_and_resumes(tiny_run, tmp_path):
+  results = json.loads(tiny_run.read_text())
+  run_steps = int(results["final_steps"])
+  out = tmp_path / "final.json"
+  flags = [f"--results={tiny_run}", f"--steps={run_steps},{run_steps + 4}", "--views=2,3",
+           "--references=farthest", f"--out={out}"]
+  printed = _final_training(*flags)
+  record = json.loads(out.read_text())
+  rows = record["rows"]
+  assert len(rows) == 2 * 2 * 2  # strategies x view counts x lengths, one initialisation
+  assert not any(r["from_run_record"] for r in rows)
+  # Trained again at the run's length from its seed, a final model is the run's own.
+  assert record["max_reproduction_error_db"] < 1e-3
+  for run in results["runs"]:
+    for n in (2, 3):
+      row, = [r for r in rows if (r["strategy"], r["seed"], r["views"], r["steps"])
+              == (run["strategy"], run["seed"], n, run_steps)]
+      assert row["ssim"] == pytest.approx(run["metrics"][str(n)]["ssim"], abs=1e-4)
+  assert f"trained for {out}: 8 models" in printed
+  assert set(record["summary"]) == {str(run_steps), str(run_steps + 4)}
+  # Paired with farthest point by seed: the difference of the two rows.
+  paired = record["summary"][str(run_steps)]["3"]["paired_psnr"]["farthest"]["random"]["3"]
+  psnr = {r["strategy"]: r["psnr"] for r in rows if r["views"] == 3 and r["steps"] == run_steps}
+  assert paired["values"] == [pytest.approx(psnr["random"] - psnr["farthest"])]
+
+  # The same call again finds every row done.
+  _final_training(*flags)
+  assert json.loads(out.read_text())["rows"] == rows
+
+  # Another file takes the longer models from the first instead of training them again.
+  other = tmp_path / "other.json"
+  printed = _final_training(f"--results={tiny_run}", f"--steps={run_steps + 4}", "--views=3",
+                            f"--reuse_rows_from={out}", f"--out={other}")
+  assert "2 rows reused" in printed and "trained for" not in printed
+  reused = json.loads(other.read_text())["rows"]
+  assert all(r["reused_from"] == str(out) for r in reused)
+  assert [r["psnr"] for r in reused] == [r["psnr"] for r in rows
+                                          if r["steps"] == run_steps + 4 and r["views"] == 3]
