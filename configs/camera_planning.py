@@ -128,7 +128,8 @@ def get_config():
   opt.resample_z = False
   # The round model of the optimising variants: "" = the rounds' sampler (lowrank, the
   # paper's). The authors' published optimisation command trains rank 0, i.e. "diagonal",
-  # with fresh z every step. Neither lifts Opt. Sel. here (README, view optimisation).
+  # with fresh z every step. Neither lifts Opt. Sel. here
+  # (docs/camera_planning.md, gradient ascent on the camera).
   opt.sampler = ""
   # Ours (Opt. Best) scores every best_every-th pose of the ascent (and its end) as the
   # candidates are scored, and keeps the best of them and the start: 6 extra scorings here.

@@ -86,7 +86,7 @@ def get_config():
   config.loss = loss = ml_collections.ConfigDict()  # Eq. 9.
   loss.ssim_weight = 0.2  # w in (1 - w) L1 + w (1 - SSIM).
   # lambda of the volume term on the plain sum of |B_hat|. None: 1 / (training views), as
-  # in the authors' code; the paper's text says 1 (see the README's notes).
+  # in the authors' code; the paper's text says 1 (README, stochastic field and training).
   loss.volume_weight = config_dict.placeholder(float)
   loss.volume_every = 10  # The volume term is applied on every 10th step only (paper).
   loss.volume_stop_before_end = 100  # No volume term in the last steps (authors' code).

@@ -42,8 +42,9 @@ def test_every_default_field_has_a_comment():
 
 
 PLANNING_CONFIGS = sorted(p.name for p in (ROOT / "configs").glob("camera_planning*.py"))
-# Configs the README runs in the workdir of another: they may differ only in the fields
-# that `runner` lets change between calls (seeds, strategies, presentation).
+# Configs the README or docs/camera_planning.md run in the workdir of another: they may
+# differ only in the fields that `runner` lets change between calls (seeds, strategies,
+# presentation).
 SHARED_WORKDIRS = {"camera_planning_results.py": "camera_planning.py",
                    "camera_planning_seeds8.py": "camera_planning.py",
                    "camera_planning_lego_seeds8.py": "camera_planning_lego.py",
@@ -91,8 +92,8 @@ def test_a_different_protocol_needs_its_own_workdir():
   assert _comparable("camera_planning_scale.py") != _comparable("camera_planning.py")
 
 
-# Committed planning results and the config the README names for each: rerunning the
-# README's command must redo the same protocol (the resume guard would refuse otherwise).
+# Committed planning results and the config the documentation names for each: rerunning
+# its command must redo the same protocol (the resume guard would refuse otherwise).
 COMMITTED_RESULTS = {"camera_planning_default": "camera_planning_results.py",
                      "camera_planning_seeds8": "camera_planning_seeds8.py",
                      "camera_planning_lego": "camera_planning_lego.py",
@@ -121,7 +122,7 @@ def test_committed_results_were_made_with_their_config(results, name):
 
 
 # Farthest point trains no round model, so the round length cannot change its views or
-# its final models: the README pairs the 2000-step runs with it on that ground.
+# its final models: docs/camera_planning.md pairs the 2000-step runs with it on that ground.
 @pytest.mark.parametrize("short,long", [("camera_planning_seeds8", "camera_planning_rounds2000"),
                                         ("camera_planning_lego_seeds8",
                                          "camera_planning_lego_rounds2000")])

@@ -330,10 +330,11 @@ def ours_opt_best_strategy(cfg, opt_cfg) -> Strategy:
 
   The ascent follows the gradient of an M = `opt_cfg.samples` estimate of U at a reduced
   size, with z scaled down in its second half; at this scale it often ends at a pose with a
-  lower U than its start (README, view optimisation). This variant scores the start and
-  every `opt_cfg.best_every`-th pose of the trajectory (and its end) as Ours (Sel.) scores
-  candidates (M = `cfg.select_samples`, unscaled z, the scoring size) and returns the
-  highest: the start candidate itself when no visited pose beats it (ties keep the start).
+  lower U than its start (docs/camera_planning.md, gradient ascent on the camera). This
+  variant scores the start and every `opt_cfg.best_every`-th pose of the trajectory (and its
+  end) as Ours (Sel.) scores candidates (M = `cfg.select_samples`, unscaled z, the scoring
+  size) and returns the highest: the start candidate itself when no visited pose beats it
+  (ties keep the start).
   """
   def select(inputs, key):
     start, _, _, info = _optimise_from_selection(inputs, cfg, opt_cfg, key)
