@@ -370,6 +370,27 @@ def test_protocol_runs_end_to_end_and_resumes(tmp_path):
     runner.restore_runs(restored_dir, str(tmp_path))
 
 
+def test_rounds_densify_when_their_config_asks():
+  """The authors' round models: densification and lambda = 1 / views (unpadded training)."""
+  config = tiny_config()
+  d = config.round_train.densify
+  d.start, d.every, d.stop = 20, 20, config.rounds.steps
+  config.round_train.loss.volume_weight = None
+  pool = tiny_pool()
+  selected = [runner.candidate_view(pool, i) for i in (0, 4)]
+  trained = runner.Trainer(config, pool).round_state("stochastic", selected, 0)
+  live = int(np.asarray(trained.model.mask).sum())
+  assert live > config.round_train.model.init_points  # densified
+  assert live <= config.round_train.model.max_gaussians
+  z = unc.uncertainty_z(trained.model, 2)
+  u = unc.uncertainty(trained.model, selected[0].camera, z).value
+  assert np.isfinite(float(u)) and float(u) > 0.0
+  # The paper's warm start continues one padded state, which cannot change shape.
+  config.rounds.warm_start = True
+  with pytest.raises(ValueError, match="cannot densify"):
+    runner.Trainer(config, pool).round_state("stochastic", selected, 0)
+
+
 def test_resume_guard_reads_a_field_added_later_as_the_old_behaviour(tmp_path):
   config = tiny_config()
   (tmp_path / "runs").mkdir()

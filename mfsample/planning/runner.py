@@ -153,13 +153,25 @@ class Trainer:
     """`training.Trained` of a model of kind `base` after the round on `selected` (cached).
 
     Warm start: the previous round's state (recursively) continued for `rounds.steps` more
-    steps on the larger view set; otherwise a fresh model trained `rounds.steps` steps.
+    steps on the larger view set; otherwise a fresh model trained `rounds.steps` steps,
+    with densification where the round config asks for it (the authors' rounds).
     """
     keys = tuple(view_key(s) for s in selected)
     r = self.config.rounds
 
     def make():
       cfg = round_config(self.config, base)
+      if cfg.densify.start < cfg.train.num_steps:
+        if r.warm_start:
+          raise ValueError("rounds.warm_start continues one padded state, which cannot "
+                           "densify: set round_train.densify.start >= rounds.steps")
+        t0 = time.perf_counter()
+        trained = training.train_densified(
+            cfg, as_views(selected, int(r.downscale)), seed=seed, bounds=self.pool.bounds,
+            settings=self.settings.get(("round", base)))
+        self.train_seconds += time.perf_counter() - t0
+        self.settings[("round", base)] = trained.settings
+        return trained
       state, stop_at = None, int(r.steps)
       if r.warm_start:
         stop_at = int(r.first_steps)
@@ -212,9 +224,9 @@ class Trainer:
                                           pad_to=self.config.max_views,
                                           settings=self.settings.get("final"))
       else:
-        trained = training.train_final(cfg, as_views(selected), seed=seed,
-                                       bounds=self.pool.bounds,
-                                       settings=self.settings.get("final"))
+        trained = training.train_densified(cfg, as_views(selected), seed=seed,
+                                           bounds=self.pool.bounds,
+                                           settings=self.settings.get("final"))
       self.settings["final"] = trained.settings
       self.train_seconds += time.perf_counter() - t0
       return trained.model

@@ -14,8 +14,10 @@ sits in the step's static settings: `data.extent` and `loss.volume_weight` (the 
 use 1 / number of views; the planning configs state the constant they use instead).
 `train_on_views` can also continue from a previous state on a larger view set, for the
 paper's reading of the protocol (one training run, a camera added every so many steps).
-Rounds run without densification (`densify.start >= train.num_steps`); the final models
-(`train_final`) use `mfsample.train.train` itself, densification included.
+A model that densifies changes shape as it trains, so padding saves nothing: rounds and
+final models with densification (`densify.start < train.num_steps`) go through
+`train_densified`, which is `mfsample.train.train` itself (one compilation per view count
+and capacity), with the authors' volume weight 1 / number of views allowed.
 """
 
 import dataclasses
@@ -90,7 +92,7 @@ def train_on_views(config, views, *, seed, bounds, pad_to, settings=None, state=
                      "set: otherwise the jitted step recompiles for every view count")
   if config.densify.start < config.train.num_steps:
     raise ValueError("planning rounds run without densification: set densify.start >= "
-                     "train.num_steps (or use train_final)")
+                     "train.num_steps (or use train_densified)")
   setup = _setup(config, views, settings)
   if state is None:
     state = init_state(config, setup, _box(bounds))
@@ -114,8 +116,9 @@ def _trained(result, with_state=False) -> Trained:
                  result.state if with_state else None)
 
 
-def train_final(config, views, *, seed, bounds, settings=None) -> Trained:
-  """Trains the final (plain) model on `views` with `mfsample.train.train` as it is."""
+def train_densified(config, views, *, seed, bounds, settings=None) -> Trained:
+  """Trains a model on `views` with `mfsample.train.train` as it is, densification included
+  (the final models' path; the rounds' when their config densifies)."""
   config = _with_seed(config, seed)
   result = train(config, views, setup=_setup(config, views, settings), bounds=_box(bounds))
   return _trained(result)
