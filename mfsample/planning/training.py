@@ -91,8 +91,9 @@ def train_on_views(config, views, *, seed, bounds, pad_to, settings=None, state=
     raise ValueError("train_on_views needs config.data.extent and config.loss.volume_weight "
                      "set: otherwise the jitted step recompiles for every view count")
   if config.densify.start < config.train.num_steps:
-    raise ValueError("planning rounds run without densification: set densify.start >= "
-                     "train.num_steps (or use train_densified)")
+    raise ValueError("train_on_views trains padded, fixed-shape models without "
+                     "densification: set densify.start >= train.num_steps, or use "
+                     "train_densified")
   setup = _setup(config, views, settings)
   if state is None:
     state = init_state(config, setup, _box(bounds))
