@@ -165,6 +165,12 @@ class Trainer:
         if r.warm_start:
           raise ValueError("rounds.warm_start continues one padded state, which cannot "
                            "densify: set round_train.densify.start >= rounds.steps")
+        # Every densified round compiles its own shapes (view count, capacity buckets), and
+        # XLA:CPU keeps each executable's code mapped: a lego run exhausted the process's
+        # memory maps (vm.max_map_count, 65530) in its second seed. What an earlier round
+        # compiled has other shapes than this one's, but for a few small functions that
+        # recompile in seconds against a round's minutes, so the caches go first.
+        jax.clear_caches()
         t0 = time.perf_counter()
         trained = training.train_densified(
             cfg, as_views(selected, int(r.downscale)), seed=seed, bounds=self.pool.bounds,
