@@ -149,6 +149,28 @@ class Trainer:
       self.cache.popitem(last=False)
     return value
 
+  def _train(self, cfg, selected, seed, budget, downscale=1, state=None, stop_at=None):
+    """Trains `cfg` on the `selected` views; the render budget that sufficed is kept under
+    `budget` for the next call.
+
+    A fixed-shape model trains padded to `max_views` image slots (one compilation for every
+    view count; `state` / `stop_at` continue one, see `training.train_on_views`); a model
+    that densifies changes shape anyway and trains with `mfsample.train.train` as it is.
+    """
+    views = as_views(selected, downscale)
+    t0 = time.perf_counter()
+    if cfg.densify.start < cfg.train.num_steps:
+      trained = training.train_densified(cfg, views, seed=seed, bounds=self.pool.bounds,
+                                         settings=self.settings.get(budget))
+    else:
+      trained = training.train_on_views(cfg, views, seed=seed, bounds=self.pool.bounds,
+                                        pad_to=self.config.max_views,
+                                        settings=self.settings.get(budget), state=state,
+                                        stop_at=stop_at)
+    self.train_seconds += time.perf_counter() - t0
+    self.settings[budget] = trained.settings
+    return trained
+
   def round_state(self, base, selected, seed):
     """`training.Trained` of a model of kind `base` after the round on `selected` (cached).
 
@@ -161,6 +183,7 @@ class Trainer:
 
     def make():
       cfg = round_config(self.config, base)
+      state, stop_at = None, int(r.steps)
       if cfg.densify.start < cfg.train.num_steps:
         if r.warm_start:
           raise ValueError("rounds.warm_start continues one padded state, which cannot "
@@ -171,27 +194,13 @@ class Trainer:
         # compiled has other shapes than this one's, but for a few small functions that
         # recompile in seconds against a round's minutes, so the caches go first.
         jax.clear_caches()
-        t0 = time.perf_counter()
-        trained = training.train_densified(
-            cfg, as_views(selected, int(r.downscale)), seed=seed, bounds=self.pool.bounds,
-            settings=self.settings.get(("round", base)))
-        self.train_seconds += time.perf_counter() - t0
-        self.settings[("round", base)] = trained.settings
-        return trained
-      state, stop_at = None, int(r.steps)
-      if r.warm_start:
+      elif r.warm_start:
         stop_at = int(r.first_steps)
         if len(selected) > 1:
           prev = self.round_state(base, selected[:-1], seed)
           state, stop_at = prev.state, int(prev.state.step) + int(r.steps)
-      t0 = time.perf_counter()
-      trained = training.train_on_views(
-          cfg, as_views(selected, int(r.downscale)), seed=seed, bounds=self.pool.bounds,
-          pad_to=self.config.max_views, settings=self.settings.get(("round", base)),
-          state=state, stop_at=stop_at)
-      self.train_seconds += time.perf_counter() - t0
-      self.settings[("round", base)] = trained.settings
-      return trained
+      return self._train(cfg, selected, seed, ("round", base), int(r.downscale), state,
+                         stop_at)
 
     return self._cached(("round", base, seed, keys), make)
 
@@ -222,20 +231,7 @@ class Trainer:
     keys = tuple(view_key(s) for s in selected)
 
     def make():
-      t0 = time.perf_counter()
-      cfg = self.config.final_train
-      if cfg.densify.start >= cfg.train.num_steps:  # padded: one compilation for all counts
-        trained = training.train_on_views(cfg, as_views(selected), seed=seed,
-                                          bounds=self.pool.bounds,
-                                          pad_to=self.config.max_views,
-                                          settings=self.settings.get("final"))
-      else:
-        trained = training.train_densified(cfg, as_views(selected), seed=seed,
-                                           bounds=self.pool.bounds,
-                                           settings=self.settings.get("final"))
-      self.settings["final"] = trained.settings
-      self.train_seconds += time.perf_counter() - t0
-      return trained.model
+      return self._train(self.config.final_train, selected, seed, "final").model
 
     return self._cached(("final", seed, keys), make)
 
