@@ -11,6 +11,16 @@ the runner's paired table for each range `a:b` (seeds a .. b-1), from either
   PYTHONPATH=. python benchmarks/paired_gaps.py \
       --results=results/camera_planning_lego_rounds2000_seeds16/results.json \
       --seeds=8:16,0:16 --references=farthest
+
+`--compare=TAG:PATH` adds the runs of another results.json with the same seeds, renamed
+`strategy@TAG`, so that one protocol pairs with another by seed; `--per_seed` lists each
+seed's difference. E.g. Ours (Sel.) with the authors' round models minus Ours (Sel.) without
+densification:
+
+  PYTHONPATH=. python benchmarks/paired_gaps.py \
+      --results=results/camera_planning_lego_rounds2000_authors/results.json \
+      --compare=plain:results/camera_planning_lego_rounds2000/results.json \
+      --references=ours_sel@plain --seeds=0:8 --per_seed
 """
 
 import json
@@ -27,23 +37,34 @@ _VIEWS = flags.DEFINE_list("views", [], "View counts (default: all the file hold
 _STEPS = flags.DEFINE_integer(
     "steps", None, "Final training length of the rows to use (final_training.py outputs only; "
     "needed when the file holds more than one).")
+_COMPARE = flags.DEFINE_list(
+    "compare", [], "TAG:PATH of other runs' results.json, paired by seed as strategy@TAG.")
+_PER_SEED = flags.DEFINE_bool("per_seed", False, "Also list each seed's difference.")
 _METRIC = flags.DEFINE_enum("metric", "psnr", ["psnr", "ssim", "lpips"], "Metric to pair.")
+
+
+def _records(path):
+  with open(path) as f:
+    data = json.load(f)
+  if "runs" in data:
+    if _STEPS.value is not None:
+      raise app.UsageError("--steps applies to final_training.py outputs, not to a run")
+    return data["runs"]
+  if "rows" in data:
+    return by_seeds.records_from_final_rows(data["rows"], _STEPS.value)
+  raise ValueError(f"{path} holds neither a run's 'runs' nor final models' 'rows'")
 
 
 def main(argv):
   del argv
   if _RESULTS.value is None:
     raise app.UsageError("--results is required")
-  with open(_RESULTS.value) as f:
-    data = json.load(f)
-  if "runs" in data:
-    if _STEPS.value is not None:
-      raise app.UsageError("--steps applies to final_training.py outputs, not to a run")
-    records = data["runs"]
-  elif "rows" in data:
-    records = by_seeds.records_from_final_rows(data["rows"], _STEPS.value)
-  else:
-    raise ValueError(f"{_RESULTS.value} holds neither a run's 'runs' nor final models' 'rows'")
+  records = _records(_RESULTS.value)
+  for entry in _COMPARE.value:
+    tag, sep, path = entry.partition(":")
+    if not sep or not path:
+      raise app.UsageError(f"--compare takes TAG:PATH, got {entry!r}")
+    records = records + by_seeds.tagged(_records(path), tag)
   held = sorted({int(n) for r in records for n in r["metrics"]})
   views = [int(v) for v in _VIEWS.value] or held
   missing = sorted(set(views) - set(held))
@@ -57,7 +78,8 @@ def main(argv):
   seeds = sorted({r["seed"] for r in records})
   ranges = ([by_seeds.seed_range(t) for t in _SEEDS.value] if _SEEDS.value
             else [range(seeds[0], seeds[-1] + 1)])
-  print(by_seeds.paired_tables(records, ranges, _REFERENCES.value, views, _METRIC.value))
+  print(by_seeds.paired_tables(records, ranges, _REFERENCES.value, views, _METRIC.value,
+                              per_seed=_PER_SEED.value))
 
 
 if __name__ == "__main__":

@@ -21,7 +21,8 @@ Farthest point trains no round model, so its views are those of the 400-step leg
 it runs here so that the pairing is checked rather than assumed. FisherRF is left out for
 time (it trains round models too; Ours (Sel.) is above it on lego already at 400-step
 rounds, +0.08 +- 0.05). A new protocol, so a workdir of its own (on two CPU cores the
-call took 78 minutes; the outcomes are in the README's lego section):
+call took 78 minutes; the outcomes are in docs/camera_planning.md, "Lego with the
+paper's round length"):
 
   python experiments/camera_planning.py --config=configs/camera_planning_lego_rounds2000.py \
       --workdir=workdirs/camera_planning_lego_rounds2000

@@ -519,3 +519,17 @@ def test_paired_gaps_pair_by_seed_range_from_runs_and_final_rows():
   assert "| B | +1.50 ± 0.50 (better in 2/2) |" in pair
   assert "| B | +0.00 (better in 0/1) |" in alone
   assert "no seeds" in by_seeds.paired_tables(records, [range(7, 9)], ["a"], [10])
+
+
+def test_paired_gaps_pair_one_run_with_another_seed_by_seed():
+  def run(offset):
+    return [{"strategy": "sel", "label": "Sel", "seed": seed,
+             "metrics": {"10": {"psnr": 20.0 + offset * seed}}} for seed in range(3)]
+  with pytest.raises(ValueError, match="tag"):
+    by_seeds.tagged(run(0), "a@b")
+  records = run(1.0) + by_seeds.tagged(run(0.0), "plain")
+  assert {r["strategy"] for r in records} == {"sel", "sel@plain"}
+  # Here minus there = seed: +1.00 ± 0.58 over seeds 0-2, each seed's difference listed.
+  text = by_seeds.paired_tables(records, [range(0, 3)], ["sel@plain"], [10], per_seed=True)
+  assert "| Sel | +1.00 ± 0.58 (better in 2/3) |" in text
+  assert "| Sel | 10 | +0.000 | +1.000 | +2.000 |" in text

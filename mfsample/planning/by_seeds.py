@@ -44,8 +44,19 @@ def seconds_tables(records, ranges, names=()):
   return "\n".join(out)
 
 
-def paired_tables(records, ranges, references, views, metric="psnr"):
-  """Markdown: per seed range and reference, the paired differences of the others to it."""
+def tagged(records, tag):
+  """The records of another run, renamed `strategy@tag` / `Label [tag]`, so that they can be
+  paired by seed with a run of the same strategies (two protocols with the same seeds share
+  the initial view and the random initialisation)."""
+  if not tag or "@" in tag:
+    raise ValueError(f"a run's tag is a non-empty name without '@', got {tag!r}")
+  return [{**r, "strategy": f"{r['strategy']}@{tag}", "label": f"{r['label']} [{tag}]"}
+          for r in records]
+
+
+def paired_tables(records, ranges, references, views, metric="psnr", per_seed=False):
+  """Markdown: per seed range and reference, the paired differences of the others to it
+  (with `per_seed`, each seed's difference too)."""
   labels = _labels(records)
   out = []
   for seeds in ranges:
@@ -58,7 +69,27 @@ def paired_tables(records, ranges, references, views, metric="psnr"):
       out.append(f"{_title(seeds)}, paired with {labels[reference]} (mean ± standard error):"
                  "\n\n" + runner.paired_markdown(paired, labels, labels[reference], views,
                                                  metric))
+      if per_seed:
+        out.append(_per_seed_markdown(paired, labels, labels[reference], views, metric))
   return "\n".join(out)
+
+
+def _per_seed_markdown(paired, labels, reference_label, views, metric):
+  """One row per strategy and view count: its difference to the reference, seed by seed."""
+  seeds = sorted({s for by_n in paired.values() for e in by_n.values() for s in e["seeds"]})
+  head = ["Method", "views"] + [f"seed {s}" for s in seeds]
+  label = dict((m, lab) for m, lab, _ in runner.METRICS)[metric]
+  lines = [f"Per seed, Δ{label} vs {reference_label}:", "",
+           "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+  for name, by_n in paired.items():
+    for n in views:
+      e = by_n.get(str(n))
+      if e is None:
+        continue
+      value = dict(zip(e["seeds"], e["values"], strict=True))
+      lines.append("| " + " | ".join([labels[name], str(n)] + [
+          f"{value[s]:+.3f}" if s in value else "-" for s in seeds]) + " |")
+  return "\n".join(lines) + "\n"
 
 
 def records_from_final_rows(rows, steps=None):
