@@ -72,8 +72,9 @@ def camera_figure(records, pool, path, seed=0):
     ax.set_ylim(-1.08, 1.08)
     ax.set_xticks([])
     ax.set_yticks([])
-  fig.suptitle(f"{pool.name}: chosen cameras seen from above (seed {seed}; star: initial "
-               "view; numbers: order; hollow: optimised pose)", fontsize=9)
+  # Two lines: with two strategies the figure is 6.4 inches wide and one line was clipped.
+  fig.suptitle(f"{pool.name}: chosen cameras seen from above, seed {seed}\n"
+               "star: initial view; numbers: order; hollow: optimised pose", fontsize=9)
   fig.tight_layout()
   fig.savefig(path, dpi=130)
   plt.close(fig)
