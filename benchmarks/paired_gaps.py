@@ -73,7 +73,7 @@ def main(argv):
   strategies = {r["strategy"] for r in records}
   unknown = [s for s in _REFERENCES.value if s not in strategies]
   if unknown:
-    raise ValueError(f"references {unknown} are not among the file's strategies "
+    raise ValueError(f"references {unknown} are not among the strategies of the file(s) "
                      f"{sorted(strategies)}")
   seeds = sorted({r["seed"] for r in records})
   ranges = ([by_seeds.seed_range(t) for t in _SEEDS.value] if _SEEDS.value
