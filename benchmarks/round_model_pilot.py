@@ -36,7 +36,7 @@ def main(argv):
   from mfsample import uncertainty as unc
   from mfsample.planning import poses, runner
   from mfsample.planning.pool import make_pool
-  from mfsample.planning.strategies import _START
+  from mfsample.render import RenderSettings
 
   config = _CONFIG.value
   with open(_RESULTS.value) as f:
@@ -46,9 +46,6 @@ def main(argv):
   trainer = runner.Trainer(config, pool)
   cameras = pool.candidates.cameras
   scored = poses.downscale_camera(cameras, int(config.strategy.score_downscale))
-  w2c = np.asarray(cameras.world_to_camera, np.float64)
-  centres = -np.einsum("bji,bj->bi", w2c[:, :3, :3], w2c[:, :3, 3])
-  directions = centres / np.linalg.norm(centres, axis=1, keepdims=True)
   for n in (int(v) for v in _VIEWS.value):
     indices = run["indices"][:n]
     t0 = time.perf_counter()
@@ -57,11 +54,11 @@ def main(argv):
     seconds = time.perf_counter() - t0
     z_seed = _Z_SEED.value if _Z_SEED.value >= 0 else int(config.strategy.ours.z_seed)
     z = unc.uncertainty_z(trained.model, int(config.strategy.ours.select_samples), z_seed)
-    out, _ = unc.score_cameras(trained.model, scored, z, settings=_START,
+    out, _ = unc.score_cameras(trained.model, scored, z,
+                               settings=RenderSettings(max_intersections=1 << 12),
                                background=jnp.asarray(pool.background))
     u = np.asarray(out.values)
-    cosine = np.clip((directions @ directions[indices].T).max(axis=1), -1.0, 1.0)
-    angle = np.degrees(np.arccos(cosine))
+    angle = poses.angle_to_nearest(cameras, indices, pool.sphere.center)
     rest = np.setdiff1d(np.arange(len(u)), indices)
     rho = scipy.stats.spearmanr(u[rest], angle[rest])[0]
     print(f"{n} view(s): round {seconds:.0f} s, {int(np.asarray(trained.model.mask).sum())} "

@@ -59,9 +59,6 @@ def run():
   pool = make_pool(config.data)
   cands = pool.candidates
   bg = jnp.asarray(pool.background, jnp.float32)
-  directions = np.asarray(cands.cameras.center, np.float64) - np.asarray(
-      pool.sphere.center, np.float64)
-  directions /= np.linalg.norm(directions, axis=1, keepdims=True)
   counts = [int(v) for v in _VIEWS.value]
   seeds = [int(s) for s in _SEEDS.value]
   small = poses.downscale_camera(cands.cameras, int(config.strategy.ours.score_downscale))
@@ -88,7 +85,7 @@ def run():
       error = np.mean((np.asarray(pred) - np.asarray(cands.images)) ** 2, axis=(1, 2, 3))
       unused = np.ones(len(cands), bool)
       unused[idx] = False
-      angle = np.arccos(np.clip(directions[unused] @ directions[idx].T, -1, 1)).min(axis=1)
+      angle = poses.angle_to_nearest(cands.cameras, idx, pool.sphere.center)[unused]
       for m in per_m:
         z = unc.uncertainty_z(model, m, int(cfg.strategy.ours.z_seed))
         out, settings["score"] = unc.score_cameras(

@@ -58,6 +58,15 @@ def test_random_uv_stays_in_the_band_and_grid_covers_it():
   assert grid.shape == (4, 6, 2) and v[0] == pytest.approx(0.1) and v[-1] == pytest.approx(0.4)
 
 
+def test_angle_to_nearest_measures_directions_from_the_sphere_centre():
+  # Cameras on a sphere around (1, 2, 0) at azimuths 0, 90 and 200 degrees on the equator.
+  sphere = poses.SphereSpec(center=(1.0, 2.0, 0.0), radius=3.0)
+  cams = poses.spherical_camera(jnp.asarray([[0.0, 0.5], [0.25, 0.5], [200 / 360, 0.5]]),
+                                sphere)
+  angle = np.degrees(poses.angle_to_nearest(cams, [0, 1], sphere.center))
+  np.testing.assert_allclose(angle, [0.0, 0.0, 110.0], atol=1e-2)
+
+
 def test_se3_exp_matches_the_matrix_exponential():
   with jax.enable_x64(True):
     rng = np.random.default_rng(0)

@@ -122,6 +122,14 @@ def camera_to_uv(camera: Camera, center=(0.0, 0.0, 0.0)):
   return np.stack([azimuth / (2.0 * math.pi), polar / math.pi], axis=-1)
 
 
+def angle_to_nearest(cameras: Camera, indices, center=(0.0, 0.0, 0.0)):
+  """[B] angle (radians, numpy) between each camera's direction from `center` and that of
+  the nearest camera among `cameras[indices]` (0 at those cameras)."""
+  d = np.asarray(cameras.center, np.float64) - np.asarray(center, np.float64)
+  d /= np.linalg.norm(d, axis=-1, keepdims=True)
+  return np.arccos(np.clip((d @ d[np.asarray(indices)].T).max(axis=-1), -1.0, 1.0))
+
+
 def project_uv(uv, sphere: SphereSpec):
   """Wraps u to [0, 1) and clamps v to `sphere.v_range` (applied after every step)."""
   u = jnp.mod(uv[..., 0], 1.0)

@@ -159,7 +159,7 @@ class Trainer:
     """
     views = as_views(selected, downscale)
     t0 = time.perf_counter()
-    if cfg.densify.start < cfg.train.num_steps:
+    if training.densifies(cfg):
       trained = training.train_densified(cfg, views, seed=seed, bounds=self.pool.bounds,
                                          settings=self.settings.get(budget))
     else:
@@ -184,7 +184,7 @@ class Trainer:
     def make():
       cfg = round_config(self.config, base)
       state, stop_at = None, int(r.steps)
-      if cfg.densify.start < cfg.train.num_steps:
+      if training.densifies(cfg):
         if r.warm_start:
           raise ValueError("rounds.warm_start continues one padded state, which cannot "
                            "densify: set round_train.densify.start >= rounds.steps")

@@ -60,6 +60,11 @@ def _box(bounds):
       np.asarray(high, np.float64), (3,))
 
 
+def densifies(config):
+  """Whether a training config densifies (and so changes shape) within its run."""
+  return config.densify.start < config.train.num_steps
+
+
 def train_on_views(config, views, *, seed, bounds, pad_to, settings=None, state=None,
                    stop_at=None) -> Trained:
   """Trains a model on `views` (no densification): fresh, or continuing from `state`.
@@ -90,7 +95,7 @@ def train_on_views(config, views, *, seed, bounds, pad_to, settings=None, state=
   if config.data.get("extent") is None or config.loss.volume_weight is None:
     raise ValueError("train_on_views needs config.data.extent and config.loss.volume_weight "
                      "set: otherwise the jitted step recompiles for every view count")
-  if config.densify.start < config.train.num_steps:
+  if densifies(config):
     raise ValueError("train_on_views trains padded, fixed-shape models without "
                      "densification: set densify.start >= train.num_steps, or use "
                      "train_densified")
