@@ -47,6 +47,8 @@ _RESULTS = flags.DEFINE_string(
 _STEPS = flags.DEFINE_list("steps", ["600", "2000"], "Final training lengths.")
 _VIEWS = flags.DEFINE_list("views", ["10"], "View counts to evaluate (of the run's).")
 _STRATEGIES = flags.DEFINE_list("strategies", [], "Strategies (default: all of the run's).")
+_SEEDS = flags.DEFINE_string("seeds", "", "Seed range a:b of the run's seeds to judge "
+                             "(seeds a .. b-1; default: all).")
 _INITS = flags.DEFINE_integer("inits", 1, "Final models per view set, each from its own seed.")
 _INIT_OFFSET = flags.DEFINE_integer(
     "init_offset", 1000, "Initialisation k trains from the run's seed + k * init_offset.")
@@ -171,6 +173,7 @@ def main(argv):
   from tqdm.auto import tqdm
 
   from mfsample._json import read_resumable_rows, reusable_rows, write_json
+  from mfsample.planning import by_seeds
   from mfsample.planning.pool import make_pool
   from mfsample.planning.runner import (
     Trainer,
@@ -185,7 +188,12 @@ def main(argv):
   with open(_RESULTS.value) as f:
     results = json.load(f)
   wanted = set(_STRATEGIES.value) or set(results["strategies"])
-  runs = [r for r in results["runs"] if r["strategy"] in wanted]
+  seeds = by_seeds.seed_range(_SEEDS.value) if _SEEDS.value else None
+  runs = [r for r in results["runs"] if r["strategy"] in wanted
+          and (seeds is None or int(r["seed"]) in seeds)]
+  if not runs:
+    raise ValueError(f"{_RESULTS.value} has no runs of {sorted(wanted)} in the seeds "
+                     f"{_SEEDS.value or 'of the run'}")
   views = [int(v) for v in _VIEWS.value]
   steps_list = [int(s) for s in _STEPS.value]
   final_steps = int(results["final_steps"])

@@ -20,13 +20,14 @@ from mfsample.planning import runner
 REPO = Path(__file__).resolve().parents[1]
 
 
-def _final_training(*args):
+def _final_training(*args, check=True):
   env = {**os.environ, "PYTHONPATH": str(REPO)}
   proc = subprocess.run(
       [sys.executable, "benchmarks/final_training.py", "--config=configs/camera_planning_tiny.py",
        *args], cwd=REPO, env=env, capture_output=True, text=True, timeout=600)
-  assert proc.returncode == 0, proc.stderr[-3000:]
-  return proc.stdout
+  if check:
+    assert proc.returncode == 0, proc.stderr[-3000:]
+  return proc
 
 
 @pytest.fixture(scope="module")
@@ -46,7 +47,7 @@ def test_final_training_reproduces_the_run_and_resumes(tiny_run, tmp_path):
   out = tmp_path / "final.json"
   flags = [f"--results={tiny_run}", f"--steps={run_steps},{run_steps + 4}", "--views=2,3",
            "--references=farthest", f"--out={out}"]
-  printed = _final_training(*flags)
+  printed = _final_training(*flags).stdout
   record = json.loads(out.read_text())
   rows = record["rows"]
   assert len(rows) == 2 * 2 * 2  # strategies x view counts x lengths, one initialisation
@@ -72,9 +73,18 @@ def test_final_training_reproduces_the_run_and_resumes(tiny_run, tmp_path):
   # Another file takes the longer models from the first instead of training them again.
   other = tmp_path / "other.json"
   printed = _final_training(f"--results={tiny_run}", f"--steps={run_steps + 4}", "--views=3",
-                            f"--reuse_rows_from={out}", f"--out={other}")
+                            f"--reuse_rows_from={out}", f"--out={other}").stdout
   assert "2 rows reused" in printed and "trained for" not in printed
   reused = json.loads(other.read_text())["rows"]
   assert all(r["reused_from"] == str(out) for r in reused)
   assert [r["psnr"] for r in reused] == [r["psnr"] for r in rows
                                           if r["steps"] == run_steps + 4 and r["views"] == 3]
+
+
+def test_final_training_judges_only_the_seeds_asked_for(tiny_run, tmp_path):
+  out = tmp_path / "final.json"
+  common = [f"--results={tiny_run}", "--steps=4", "--views=2", f"--out={out}"]
+  _final_training(*common, "--seeds=0:1")  # The tiny run's one seed.
+  assert {r["seed"] for r in json.loads(out.read_text())["rows"]} == {0}
+  proc = _final_training(*common, "--seeds=1:3", check=False)
+  assert proc.returncode != 0 and "has no runs" in proc.stderr

@@ -400,6 +400,23 @@ def test_rounds_densify_when_their_config_asks():
     runner.Trainer(config, pool).round_state("stochastic", selected, 0)
 
 
+def test_final_models_densify_when_their_config_asks():
+  """The authors' final model: 3DGS with densification (configs/*_final_densified.py)."""
+  config = tiny_config()
+  t = config.final_train
+  t.train.num_steps = 30
+  t.densify.start, t.densify.every, t.densify.stop = 10, 10, t.train.num_steps
+  pool = tiny_pool()
+  selected = [runner.candidate_view(pool, i) for i in (0, 4)]
+  trainer = runner.Trainer(config, pool)
+  model = trainer.final_model(selected, 0)
+  live = int(np.asarray(model.mask).sum())
+  assert t.model.init_points < live <= t.model.max_gaussians
+  metrics, _ = runner.evaluate_model(model, pool.test, background=pool.background,
+                                     settings=trainer.settings["final"])
+  assert np.isfinite(metrics["psnr"])
+
+
 def test_resume_guard_reads_a_field_added_later_as_the_old_behaviour(tmp_path):
   config = tiny_config()
   (tmp_path / "runs").mkdir()

@@ -160,6 +160,13 @@ class Trainer:
     views = as_views(selected, downscale)
     t0 = time.perf_counter()
     if training.densifies(cfg):
+      # Every densified model compiles its own shapes (view count, capacity buckets), and
+      # XLA:CPU keeps each executable's code mapped: a lego run exhausted the process's
+      # memory maps (vm.max_map_count, 65530) in its second seed. What an earlier model
+      # compiled has other shapes than this one's, but for a few small functions that
+      # recompile in seconds against a model's minutes, so the caches go first. The clear
+      # is process-wide: other compiled functions of the caller recompile on next use.
+      jax.clear_caches()
       trained = training.train_densified(cfg, views, seed=seed, bounds=self.pool.bounds,
                                          settings=self.settings.get(budget))
     else:
@@ -188,12 +195,6 @@ class Trainer:
         if r.warm_start:
           raise ValueError("rounds.warm_start continues one padded state, which cannot "
                            "densify: set round_train.densify.start >= rounds.steps")
-        # Every densified round compiles its own shapes (view count, capacity buckets), and
-        # XLA:CPU keeps each executable's code mapped: a lego run exhausted the process's
-        # memory maps (vm.max_map_count, 65530) in its second seed. What an earlier round
-        # compiled has other shapes than this one's, but for a few small functions that
-        # recompile in seconds against a round's minutes, so the caches go first.
-        jax.clear_caches()
       elif r.warm_start:
         stop_at = int(r.first_steps)
         if len(selected) > 1:
