@@ -105,6 +105,8 @@ COMMITTED_RESULTS = {"camera_planning_default": "camera_planning_results.py",
                          "camera_planning_lego_rounds2000_fisher.py",
                      "camera_planning_lego_rounds2000_authors":
                          "camera_planning_lego_rounds2000_authors.py",
+                     "camera_planning_lego_rounds2000_fullres":
+                         "camera_planning_lego_rounds2000_fullres.py",
                      "camera_planning_scale": "camera_planning_scale.py",
                      "camera_planning_rounds2000": "camera_planning_rounds2000.py",
                      "camera_planning_rounds2000_seeds16":
