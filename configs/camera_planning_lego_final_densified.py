@@ -25,6 +25,11 @@ before any of its models trained. Fixed in advance:
       --results=results/camera_planning_lego_rounds2000_seeds16/results.json \
       --strategies=farthest,ours_sel --seeds=0:8 --steps=2000 --views=10 \
       --references=farthest --out=results/final_2000_densified_lego.json
+
+Added after the outcome over seeds 0-7 (+0.25 +- 0.21 dB, 6 of 8; docs/camera_planning.md)
+and before any model of seeds 8-15 trained: the same judge for seeds 8-15 of the same run,
+all eight reported, whatever they show; the outcome over seeds 8-15 and over all sixteen
+(the same call with `--seeds=8:16`, then `paired_gaps.py --seeds=8:16,0:16`).
 """
 
 from configs import camera_planning_lego_rounds2000_seeds16
