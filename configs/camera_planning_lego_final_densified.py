@@ -30,6 +30,12 @@ Added after the outcome over seeds 0-7 (+0.25 +- 0.21 dB, 6 of 8; docs/camera_pl
 and before any model of seeds 8-15 trained: the same judge for seeds 8-15 of the same run,
 all eight reported, whatever they show; the outcome over seeds 8-15 and over all sixteen
 (the same call with `--seeds=8:16`, then `paired_gaps.py --seeds=8:16,0:16`).
+
+Added after all sixteen (+0.06 +- 0.14 dB, 9 of 16, with per-seed swings of +-0.5-0.9 dB)
+and before any of its models: how much of that swing is the densified model's own random
+start. A second initialisation (train seed + 1000) for seeds 0-3, both strategies
+(`--seeds=0:4 --inits=2`, the same `--out`); the outcome is the spread between the two
+initialisations of each view set, beside the per-seed gaps.
 """
 
 from configs import camera_planning_lego_rounds2000_seeds16
