@@ -23,7 +23,15 @@ Before this config was written, a pilot (`benchmarks/round_model_pilot.py` on th
 1 and 5 views of farthest point's seed-0 run, the config's Sobol seed) timed one round and
 checked U, no planning run and no PSNR: at 80 x 80, 44 and 40 s per round (compilation
 included) and rho(U, angle to the nearest training view) +0.96 and +0.58 over the other
-candidates; at 40 x 40, 28 and 23 s and +0.91 and +0.54.
+candidates; at 40 x 40, 28 and 23 s and +0.91 and +0.54. The 80 x 80 figures come from
+
+  PYTHONPATH=. python benchmarks/round_model_pilot.py \
+      --config=configs/camera_planning_lego_rounds2000.py --config.rounds.downscale=1 \
+      --config.strategy.score_downscale=1 \
+      --results=results/camera_planning_lego_rounds2000/results.json --views=1,5
+
+(run as two calls, --views=5 and --views=1, each timing its round alone), the 40 x 40 ones
+from the same command without the two overrides.
 
 A new protocol, so a workdir of its own. Farthest point trains no round model (its views
 are those of every lego run) and reruns here only for its final models, so that the
