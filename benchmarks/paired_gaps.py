@@ -6,7 +6,8 @@ the runner's paired table for each range `a:b` (seeds a .. b-1), from either
 
 - a planning run's `results.json` (the metrics of the run's own final models), or
 - the output of `benchmarks/final_training.py` (`--steps` picks the final models; of each
-  view set, the model trained from the run's own seed, the protocol's one model).
+  view set, the model trained from the run's own seed, the protocol's one model; with
+  `--mean_over_inits`, the mean over its initialisations).
 
   PYTHONPATH=. python benchmarks/paired_gaps.py \
       --results=results/camera_planning_lego_rounds2000_seeds16/results.json \
@@ -40,6 +41,9 @@ _STEPS = flags.DEFINE_integer(
 _COMPARE = flags.DEFINE_list(
     "compare", [], "TAG:PATH of other runs' results.json, paired by seed as strategy@TAG.")
 _PER_SEED = flags.DEFINE_bool("per_seed", False, "Also list each seed's difference.")
+_MEAN_OVER_INITS = flags.DEFINE_bool(
+    "mean_over_inits", False, "final_training.py outputs: judge each view set by the mean over "
+    "its initialisations instead of its one model from the run's own seed.")
 _METRIC = flags.DEFINE_enum("metric", "psnr", ["psnr", "ssim", "lpips"], "Metric to pair.")
 
 
@@ -49,9 +53,11 @@ def _records(path):
   if "runs" in data:
     if _STEPS.value is not None:
       raise app.UsageError("--steps applies to final_training.py outputs, not to a run")
+    if _MEAN_OVER_INITS.value:
+      raise app.UsageError("--mean_over_inits applies to final_training.py outputs, not to a run")
     return data["runs"]
   if "rows" in data:
-    return by_seeds.records_from_final_rows(data["rows"], _STEPS.value)
+    return by_seeds.records_from_final_rows(data["rows"], _STEPS.value, _MEAN_OVER_INITS.value)
   raise ValueError(f"{path} holds neither a run's 'runs' nor final models' 'rows'")
 
 

@@ -545,6 +545,12 @@ def test_paired_gaps_pair_by_seed_range_from_runs_and_final_rows():
   assert "| B | +1.50 ± 0.50 (better in 2/2) |" in pair
   assert "| B | +0.00 (better in 0/1) |" in alone
   assert "no seeds" in by_seeds.paired_tables(records, [range(7, 9)], ["a"], [10])
+  # The mean over a view set's initialisations (psnr + offset: +500 over offsets 0 and 1000).
+  means = by_seeds.records_from_final_rows(rows, 2000, mean_over_inits=True)
+  assert {r["metrics"]["10"]["psnr"] for r in means if r["strategy"] == "a"} == {520.2}
+  assert {r["inits"] for r in means} == {2} and {r["inits"] for r in records} == {1}
+  with pytest.raises(ValueError, match="b seed 3 .10 views.: 1"):
+    by_seeds.records_from_final_rows(rows[:-1], 2000, mean_over_inits=True)
 
 
 def test_paired_gaps_pair_one_run_with_another_seed_by_seed():

@@ -8,6 +8,8 @@ runner's own tables (`runner.seconds_markdown`, `runner.paired_markdown`) per ra
 `benchmarks/final_training.py` writes.
 """
 
+import numpy as np
+
 from mfsample.planning import runner
 
 
@@ -92,10 +94,13 @@ def _per_seed_markdown(paired, labels, reference_label, views, metric):
   return "\n".join(lines) + "\n"
 
 
-def records_from_final_rows(rows, steps=None):
-  """Run-style records ({strategy, label, seed, metrics: {n: {psnr, ssim}}}) from the rows of
+def records_from_final_rows(rows, steps=None, mean_over_inits=False):
+  """Run-style records ({strategy, label, seed, inits, metrics: {n: {psnr, ssim}}}) from the rows of
   final_training.py at `steps` (None: the one length the rows hold), one model per view set:
-  the one trained from the run's own seed, as the protocol trains it."""
+  the one trained from the run's own seed, as the protocol trains it. With
+  `mean_over_inits`, each view set's metrics are the mean over all its models (its
+  initialisations); every view set must then have as many, or the means would not be
+  alike (an error names the view sets that differ)."""
   lengths = sorted({r["steps"] for r in rows})
   if steps is None:
     if len(lengths) != 1:
@@ -103,11 +108,21 @@ def records_from_final_rows(rows, steps=None):
     steps = lengths[0]
   if steps not in lengths:
     raise ValueError(f"no final models of {steps} steps; the rows hold {lengths}")
+  chosen = [r for r in rows if r["steps"] == steps
+            and (mean_over_inits or r["train_seed"] == r["seed"])]
+  models = {}
+  for r in chosen:
+    models.setdefault((r["strategy"], r["seed"], r["views"]), []).append(r)
+  counts = {key: len(group) for key, group in models.items()}
+  if len(set(counts.values())) > 1:
+    most = max(counts.values())
+    short = sorted(f"{s} seed {seed} ({n} views): {c}" for (s, seed, n), c in counts.items()
+                   if c < most)
+    raise ValueError(f"view sets with fewer than {most} initialisations: {', '.join(short)}")
   records = {}
-  for r in rows:
-    if r["steps"] != steps or r["train_seed"] != r["seed"]:
-      continue
-    rec = records.setdefault((r["strategy"], r["seed"]), {
-        "strategy": r["strategy"], "label": r["label"], "seed": r["seed"], "metrics": {}})
-    rec["metrics"][str(r["views"])] = {"psnr": r["psnr"], "ssim": r["ssim"]}
+  for (strategy, seed, n), group in models.items():
+    rec = records.setdefault((strategy, seed), {
+        "strategy": strategy, "label": group[0]["label"], "seed": seed, "inits": len(group),
+        "metrics": {}})
+    rec["metrics"][str(n)] = {m: float(np.mean([r[m] for r in group])) for m in ("psnr", "ssim")}
   return list(records.values())
