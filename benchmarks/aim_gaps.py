@@ -23,7 +23,7 @@ from absl import app, flags
 from mfsample.planning import by_seeds, runner
 
 _OUT = flags.DEFINE_string("out", "results/aim_gaps.json", "JSON output (the figure beside it).")
-_VIEWS = flags.DEFINE_integer("views", 10, "View count the gaps are taken at.")
+AIM_VIEWS = 10  # The aim is stated at 10 views (some records hold no other count).
 
 SEL_FAR = ("ours_sel", "farthest")
 SEL_FISHER = ("ours_sel", "fisher")
@@ -190,7 +190,7 @@ def _plot(rows, views, path):
 
 def main(argv):
   del argv
-  views = _VIEWS.value
+  views = AIM_VIEWS
   rows = [(e, gap(e, views)) for e in _entries()]
   print(f"PSNR differences at {views} views, paired by seed, mean ± standard error:\n")
   print(_markdown(rows))
