@@ -30,6 +30,15 @@ was committed before any of its models trained. Fixed in advance:
   PYTHONPATH=. python benchmarks/final_training.py ... --seeds=0:24 \
       --out=results/final_2000_densified_default.json --reuse_rows_from=OUT_A.json,OUT_B.json
 
+Added after the outcome over seeds 0-23 (Ours (Sel.) - farthest point -0.20 +- 0.11 dB,
+10 of 24; Ours (Opt. Sel.) - Ours (Sel.) -0.18 +- 0.12, 8 of 24) and before any of its
+models: how much of it is the densified model's own start. A second initialisation (train
+seed + 1000) of all 72 view sets (`--inits=2`, the missing models in two calls side by side
+over seeds 0-11 and 12-23, each with `--reuse_rows_from=results/final_2000_densified_default.json`,
+then merged as above). The outcomes: the same two gaps of the per-view-set mean over the
+two models, over seeds 0-23, whatever they show, beside the first initialisation alone and
+the spread between a view set's two models.
+
 The timing pilot that sized this (103 s a model alone) judged a view set outside the
 outcome: FisherRF, seed 0, of `results/camera_planning_rounds2000/`.
 """
