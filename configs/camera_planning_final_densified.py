@@ -44,17 +44,8 @@ outcome: FisherRF, seed 0, of `results/camera_planning_rounds2000/`.
 """
 
 from configs import camera_planning_rounds2000_opt_sel_seeds24
-
-FINAL_STEPS = 2000
+from configs.camera_planning_lego_final_densified import with_densified_final_model
 
 
 def get_config():
-  config = camera_planning_rounds2000_opt_sel_seeds24.get_config()
-  t = config.final_train
-  t.train.num_steps = FINAL_STEPS  # `final_training.py --steps` sets it too.
-  t.densify.start = 500  # The authors' (3DGS) first densification ...
-  t.densify.every = 100  # ... and period ...
-  t.densify.stop = FINAL_STEPS  # ... to the end of the model's training.
-  t.densify.opacity_reset_every = 3_000  # No reset within 2000 steps.
-  t.model.max_gaussians = 20_000  # Cap on live Gaussians (as lego's densified judge).
-  return config
+  return with_densified_final_model(camera_planning_rounds2000_opt_sel_seeds24.get_config())

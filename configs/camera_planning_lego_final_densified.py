@@ -53,7 +53,12 @@ FINAL_STEPS = 2000
 
 
 def get_config():
-  config = camera_planning_lego_rounds2000_seeds16.get_config()
+  return with_densified_final_model(camera_planning_lego_rounds2000_seeds16.get_config())
+
+
+def with_densified_final_model(config):
+  """`config` with its final model trained FINAL_STEPS steps with 3DGS densification (the
+  recipe of both densified judges, lego's and the default scene's)."""
   t = config.final_train
   t.train.num_steps = FINAL_STEPS  # `final_training.py --steps` sets it too.
   t.densify.start = 500  # The authors' (3DGS) first densification ...
