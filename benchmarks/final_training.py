@@ -58,6 +58,9 @@ _REUSE_RUN = flags.DEFINE_bool(
 _REFERENCES = flags.DEFINE_list(
     "references", ["farthest", "fisher", "ours_sel"],
     "Strategies the others are paired with (those the run has).")
+_ANY_RESOLUTION = flags.DEFINE_bool(
+    "any_resolution", False, "Judge the run's views at the config's image size even where it "
+    "differs from the run's (the same candidates by index; new poses captured at that size).")
 _OUT = flags.DEFINE_string("out", "results/final_training.json", "JSON output (resumable).")
 _REUSE_ROWS_FROM = flags.DEFINE_list(
     "reuse_rows_from", [], "Outputs of earlier calls (e.g. on a run with fewer seeds) whose "
@@ -179,6 +182,7 @@ def main(argv):
     Trainer,
     check_run_matches,
     evaluate_model,
+    pool_record,
     selected_from_record,
   )
 
@@ -198,7 +202,7 @@ def main(argv):
   steps_list = [int(s) for s in _STEPS.value]
   final_steps = int(results["final_steps"])
   pool = make_pool(config.data)
-  check_run_matches(pool, results)
+  check_run_matches(pool, results, any_resolution=_ANY_RESOLUTION.value)
   selections = {id(run): selected_from_record(run, pool) for run in runs}
 
   def train_seeds_of(run):
@@ -210,6 +214,12 @@ def main(argv):
             "config": config_flags.get_config_filename(flags.FLAGS["config"]),
             "final_train": json.loads(config.final_train.to_json_best_effort()),
             "init_offset": _INIT_OFFSET.value, "reuse_run": _REUSE_RUN.value}
+  if pool_record(pool)["resolution"] != results.get("resolution"):
+    # Models of another image size than the run's: never the same rows as the run's size.
+    header["judge_resolution"] = pool_record(pool)["resolution"]
+    if _REUSE_RUN.value:
+      raise ValueError("--reuse_run takes the run's own models, which saw the run's image "
+                       "size, not the config's.")
   rows = read_resumable_rows(_OUT.value, header)
 
   def key_of(model):

@@ -38,7 +38,8 @@ def reusable_rows(path, header, runs, wanted_keys):
   """Rows of another call's final-model file `path` that are models this call would train.
 
   Used by `benchmarks/final_training.py --reuse_rows_from`. A row qualifies when the file's
-  final training and initialisation offset equal `header`'s (otherwise a ValueError: all its
+  final training, initialisation offset and judging resolution (absent: the run's) equal
+  `header`'s (otherwise a ValueError: all its
   rows are other models), its key (strategy, seed, views, steps, train_seed) is in
   `wanted_keys`, it was trained (not read from a run record), and its run in the file's own
   results.json chose the same first `views` views as this call's run of that (strategy,
@@ -46,8 +47,8 @@ def reusable_rows(path, header, runs, wanted_keys):
   """
   with open(path) as f:
     old = json.load(f)
-  for field in ("final_train", "init_offset"):
-    if old["header"][field] != header[field]:
+  for field in ("final_train", "init_offset", "judge_resolution"):
+    if old["header"].get(field) != header.get(field):
       raise ValueError(f"{path} has another {field} than this call; its rows are other models.")
   with open(old["header"]["results"]) as f:
     old_runs = {(r["strategy"], int(r["seed"])): r for r in json.load(f)["runs"]}

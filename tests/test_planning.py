@@ -334,6 +334,10 @@ def test_protocol_runs_end_to_end_and_resumes(tmp_path):
   runner.check_run_matches(pool, results)
   with pytest.raises(ValueError, match=r"resolution \[24, 24\] \(the run's \[32, 32\]\)"):
     runner.check_run_matches(pool, {**results, "resolution": [32, 32]})
+  runner.check_run_matches(pool, {**results, "resolution": [32, 32]}, any_resolution=True)
+  with pytest.raises(ValueError, match="num_test"):  # ... but only the resolution may differ
+    runner.check_run_matches(pool, {**results, "resolution": [32, 32], "num_test": 99},
+                             any_resolution=True)
   # A killed run resumes: finished (strategy, seed) runs are read back, not recomputed.
   run_file = tmp_path / "runs" / "random-seed0.json"
   stamp = os.path.getmtime(run_file)

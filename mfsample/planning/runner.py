@@ -403,15 +403,18 @@ def pool_record(pool):
           "num_candidates": len(pool.candidates), "num_test": len(pool.test)}
 
 
-def check_run_matches(pool, results):
+def check_run_matches(pool, results, *, any_resolution=False):
   """Raises unless `pool` (built from a config) is the pool of a finished run (`results.json`).
 
   Compared on the pool itself, not on config fields: a blender scene's size comes from its
-  files and `data.downscale`, not from `data.width` / `data.height`.
+  files and `data.downscale`, not from `data.width` / `data.height`. `any_resolution`
+  accepts the same scene and views at another image size (the run's views judged at another
+  resolution: candidates are kept by index, new poses are captured again at that size).
   """
   have = pool_record(pool)
   differ = [f"{key} {have[key]} (the run's {results.get(key)})" for key in have
-            if key in results and have[key] != results[key]]
+            if key in results and have[key] != results[key]
+            and not (any_resolution and key == "resolution")]
   if differ:
     raise ValueError("the config's pool differs from the run's: " + ", ".join(differ)
                      + "; pass the config the run was made with.")
