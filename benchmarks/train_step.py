@@ -14,6 +14,7 @@ measures the jitted step (paper Tab. 4 measures the same thing per iteration).
 import dataclasses
 import json
 import os
+import platform
 import resource
 import statistics
 import subprocess
@@ -205,8 +206,13 @@ def main(argv):
     print(f"{variant:>13} | {row['ms_per_step']:8.1f} | {row.get('ratio', float('nan')):6.3f} | "
           f"{row['peak_rss_mb']:11.0f} | {row['params_per_gaussian']}")
   first = rounds[0][_VARIANTS.value[0]]
+  import jax  # After the children: only to name the device the figures were taken on.
+
   from mfsample._json import write_json
-  write_json(_OUT.value, {"table": table, "rounds": rounds, "resolution": first["resolution"],
+  machine = {"platform": platform.platform(), "cpu_count": os.cpu_count(),
+             "jax": jax.__version__, "device": str(jax.devices()[0])}
+  write_json(_OUT.value, {"machine": machine, "table": table, "rounds": rounds,
+                          "resolution": first["resolution"],
                           "from_checkpoints": _FROM.value, "live_gaussians": first["live"],
                           "points": _POINTS.value, "samples": _SAMPLES.value,
                           "steps": _STEPS.value, "cpu_count": os.cpu_count(),

@@ -30,10 +30,15 @@ The pilot before any paired model: one call timing the renderer and a training s
 400 x 400 on the GPU and training farthest point's first final models, to size the runs.
 
   PYTHONPATH=. python benchmarks/final_training.py \
-      --config=configs/camera_planning_lego_final_paper_scale.py \
+      --config=configs/camera_planning_lego_final_paper_scale.py --any_resolution \
       --results=results/camera_planning_lego_rounds2000_seeds16/results.json \
       --strategies=farthest,ours_sel --seeds=0:16 --steps=7000 --views=10 \
       --references=farthest --out=results/final_7000_paper_scale_lego.json
+
+Added after the lease: no model finished, so there is no outcome. The pilot's three
+farthest-point models (seeds 0-2, side by side) were stopped at 470 s unfinished; a step
+from the initial cloud takes 466 ms on the H100, so a model takes about an hour of it with
+this renderer (docs/camera_planning.md, "Lego at the paper's scale on a GPU").
 """
 
 from configs import camera_planning_lego_rounds2000_seeds16

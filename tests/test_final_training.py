@@ -88,3 +88,26 @@ def test_final_training_judges_only_the_seeds_asked_for(tiny_run, tmp_path):
   assert {r["seed"] for r in json.loads(out.read_text())["rows"]} == {0}
   proc = _final_training(*common, "--seeds=1:3", check=False)
   assert proc.returncode != 0 and "has no runs" in proc.stderr
+
+
+def test_final_training_judges_at_another_resolution_only_when_asked(tiny_run, tmp_path):
+  # The run's views at 16 x 16 instead of the run's 24 x 24: refused unless --any_resolution,
+  # and then recorded in the header so that rows of the two sizes are never mixed.
+  out = tmp_path / "small.json"
+  common = [f"--results={tiny_run}", "--steps=4", "--views=2", "--strategies=farthest",
+            "--config.data.width=16", "--config.data.height=16", f"--out={out}"]
+  proc = _final_training(*common, check=False)
+  assert proc.returncode != 0 and "resolution [16, 16] (the run's [24, 24])" in proc.stderr
+  _final_training(*common, "--any_resolution")
+  record = json.loads(out.read_text())
+  assert record["header"]["judge_resolution"] == [16, 16]
+  assert len(record["rows"]) == 1 and 0 < record["rows"][0]["psnr"] < 100
+  same_size = tmp_path / "same.json"
+  _final_training(f"--results={tiny_run}", "--steps=4", "--views=2", "--strategies=farthest",
+                  f"--out={same_size}")
+  proc = _final_training(*common[:-1], "--any_resolution", f"--out={tmp_path / 'x.json'}",
+                         f"--reuse_rows_from={same_size}", check=False)
+  assert proc.returncode != 0 and "another judge_resolution" in proc.stderr
+  proc = _final_training(*common[:-1], "--any_resolution", "--reuse_run",
+                         f"--out={tmp_path / 'y.json'}", check=False)
+  assert proc.returncode != 0 and "--reuse_run" in proc.stderr
