@@ -11,6 +11,7 @@ reference renderer in the same process, as a ratio.
   python benchmarks/render.py                 # the full table (a few minutes)
   python benchmarks/render.py --quick         # two cells, for a smoke run
   python benchmarks/render.py --out results/render_gpu.json --cells 10000x800
+  python benchmarks/render.py --cells=50000x400 --chunks_per_step=16,64,256  # loop length
 """
 
 import json
@@ -31,6 +32,9 @@ DENSE_LIMIT = 2e7  # H * W * N: the dense reference holds [H W, N] arrays
 _CELLS = flags.DEFINE_list("cells", None, "NxRES cells; default: the full 3x3 grid.")
 _QUICK = flags.DEFINE_bool("quick", False, "Only " + ", ".join(QUICK_CELLS) + ".")
 _REPEATS = flags.DEFINE_integer("repeats", 7, "Timed calls per measurement (median).")
+_CHUNKS_PER_STEP = flags.DEFINE_list(
+    "chunks_per_step", ["16"], "RenderSettings.chunks_per_step of every cell; several values "
+    "measure every cell at each (the compositing loop's work per sequential step).")
 _OUT = flags.DEFINE_string("out", "results/bench_render.json", "Where to save the JSON.")
 _ONE = flags.DEFINE_string("one_cell", None, "Internal: run one cell and print its JSON.")
 
@@ -47,7 +51,7 @@ def _median_ms(fn, repeats):
   return 1e3 * statistics.median(times)
 
 
-def run_cell(cell, repeats):
+def run_cell(cell, repeats, chunks_per_step=16):
   """Measures one cell in this process; returns a dict."""
   import jax
   import jax.numpy as jnp
@@ -62,8 +66,9 @@ def run_cell(cell, repeats):
   camera = orbit_camera(res, res, distance=3.5, fov_x=0.9)
   target = jnp.asarray(jax.random.uniform(jax.random.PRNGKey(0), (res, res, 3)))
 
-  out, settings = render_with_budget(render, RenderSettings(max_intersections=1 << 12),
-                                     gaussians, camera)
+  start = RenderSettings(chunks_per_step=chunks_per_step)
+  start = start.replace(max_intersections=max(1 << 12, start.chunk_size * chunks_per_step))
+  out, settings = render_with_budget(render, start, gaussians, camera)
 
   def loss(g, cam):
     return jnp.mean(jnp.abs(render(g, cam, settings=settings).rgb - target))
@@ -78,6 +83,7 @@ def run_cell(cell, repeats):
                  + mem.temp_size_in_bytes)
   result = {
       "cell": cell,
+      "chunks_per_step": chunks_per_step,
       "num_gaussians": n,
       "resolution": res,
       "budget": settings.max_intersections,
@@ -104,9 +110,10 @@ def run_cell(cell, repeats):
 
 
 def _table(rows):
-  lines = ["| N | image | intersections | fwd ms | fwd+bwd ms | ms / 1k isect (fwd+bwd) "
-           "| peak RSS MB | XLA bwd MB | dense fwd / fwd+bwd (x slower) |",
-           "|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+  lines = ["| N | image | chunks / step | intersections | fwd ms | fwd+bwd ms "
+           "| ms / 1k isect (fwd+bwd) | peak RSS MB | XLA bwd MB "
+           "| dense fwd / fwd+bwd (x slower) |",
+           "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
   for r in rows:
     dense = "-"
     if "dense_forward_ms" in r:
@@ -114,7 +121,8 @@ def _table(rows):
                f"{r['dense_forward_backward_ms'] / r['forward_backward_ms']:.1f}x")
     xla = "-" if r["xla_backward_bytes"] is None else f"{r['xla_backward_bytes'] / 2**20:.0f}"
     lines.append(
-        f"| {r['num_gaussians']} | {r['resolution']}^2 | {r['intersections']} "
+        f"| {r['num_gaussians']} | {r['resolution']}^2 | {r.get('chunks_per_step', 16)} "
+        f"| {r['intersections']} "
         f"| {r['forward_ms']:.1f} | {r['forward_backward_ms']:.1f} "
         f"| {1e3 * r['forward_backward_ms'] / max(r['intersections'], 1):.2f} "
         f"| {r['peak_rss_mb']:.0f} | {xla} | {dense} |")
@@ -136,21 +144,24 @@ def _linear_fit(rows, key):
 def main(argv):
   del argv
   if _ONE.value:
-    print("RESULT " + json.dumps(run_cell(_ONE.value, _REPEATS.value)))
+    print("RESULT " + json.dumps(run_cell(_ONE.value, _REPEATS.value,
+                                          int(_CHUNKS_PER_STEP.value[0]))))
     return
   cells = _CELLS.value or (QUICK_CELLS if _QUICK.value else FULL_CELLS)
   rows = []
   for cell in cells:
-    print(f"[bench] {cell} ...", flush=True)
-    proc = subprocess.run(
-        [sys.executable, __file__, f"--one_cell={cell}", f"--repeats={_REPEATS.value}"],
-        capture_output=True, text=True, check=False)
-    line = [x for x in proc.stdout.splitlines() if x.startswith("RESULT ")]
-    if proc.returncode or not line:
-      print(proc.stdout[-2000:], proc.stderr[-4000:], file=sys.stderr)
-      raise SystemExit(f"cell {cell} failed")
-    rows.append(json.loads(line[0][len("RESULT "):]))
-    print(_table(rows[-1:]).splitlines()[-1], flush=True)
+    for chunks_per_step in _CHUNKS_PER_STEP.value:
+      print(f"[bench] {cell}, {chunks_per_step} chunks per step ...", flush=True)
+      proc = subprocess.run(
+          [sys.executable, __file__, f"--one_cell={cell}", f"--repeats={_REPEATS.value}",
+           f"--chunks_per_step={chunks_per_step}"],
+          capture_output=True, text=True, check=False)
+      line = [x for x in proc.stdout.splitlines() if x.startswith("RESULT ")]
+      if proc.returncode or not line:
+        print(proc.stdout[-2000:], proc.stderr[-4000:], file=sys.stderr)
+        raise SystemExit(f"cell {cell} failed")
+      rows.append(json.loads(line[0][len("RESULT "):]))
+      print(_table(rows[-1:]).splitlines()[-1], flush=True)
 
   import jax
 
@@ -159,9 +170,11 @@ def main(argv):
                   "jax": jax.__version__, "device": str(jax.devices()[0])},
       "cells": rows,
   }
-  if len(rows) >= 3:
-    summary["fit_forward"] = _linear_fit(rows, "forward_ms")
-    summary["fit_forward_backward"] = _linear_fit(rows, "forward_backward_ms")
+  # Time against intersections at one loop setting (the first asked for).
+  fitted = [r for r in rows if r["chunks_per_step"] == int(_CHUNKS_PER_STEP.value[0])]
+  if len(fitted) >= 3:
+    summary["fit_forward"] = _linear_fit(fitted, "forward_ms")
+    summary["fit_forward_backward"] = _linear_fit(fitted, "forward_backward_ms")
   print()
   print(_table(rows))
   for key in ("fit_forward", "fit_forward_backward"):
@@ -172,7 +185,7 @@ def main(argv):
   from mfsample._json import write_json
   write_json(_OUT.value, summary)
   print(f"saved {_OUT.value}")
-  if len(rows) >= 3:
+  if "fit_forward" in summary:
     _plot(summary, os.path.splitext(_OUT.value)[0] + ".png")
 
 
@@ -188,7 +201,8 @@ def _plot(summary, path):
     return
   import numpy as np
 
-  rows = summary["cells"]
+  first = summary["cells"][0]["chunks_per_step"]
+  rows = [r for r in summary["cells"] if r["chunks_per_step"] == first]  # those fitted
   x = np.array([r["intersections"] for r in rows], float)
   fig, ax = plt.subplots(figsize=(6, 4))
   for key, fit_key, label in (("forward_ms", "fit_forward", "forward"),
