@@ -95,6 +95,7 @@ def _entries():
       (SEL_FAR, "lego", rounds2000, FINAL_2000, "final_2000_lego_rounds2000_seeds16", ""),
       (SEL_FAR, "lego", authors, FINAL_2000, "final_2000_lego_rounds2000_authors", ""),
       (SEL_FAR, "default", rounds2000, DENSIFIED, "final_2000_densified_default", "all"),
+      (SEL_FAR, "default", rounds2000, DENSIFIED_MEAN, "final_2000_densified_default", "all"),
       (SEL_FAR, "lego", rounds2000, DENSIFIED, "final_2000_densified_lego", "all"),
       (SEL_FAR, "lego", rounds2000, DENSIFIED_MEAN, "final_2000_densified_lego", "all"),
       (SEL_FISHER, "default", rounds400, MEAN_OF_5, "final_inits_default", ""),
@@ -104,6 +105,7 @@ def _entries():
       (OPT_SEL, "default", rounds400, MEAN_OF_5, "final_inits_default", ""),
       (OPT_SEL, "default", rounds2000, FINAL_2000, "final_2000_rounds2000_opt_sel_seeds24", ""),
       (OPT_SEL, "default", rounds2000, DENSIFIED, "final_2000_densified_default", "all"),
+      (OPT_SEL, "default", rounds2000, DENSIFIED_MEAN, "final_2000_densified_default", "all"),
       (OPT_BEST, "default", rounds2000, FINAL_2000, "final_2000_rounds2000_seeds24", ""),
   ]:
     out.append(Entry(comparison, scene, protocol, judge, f"{r}{name}.json", fixed))
