@@ -39,11 +39,11 @@ def reusable_rows(path, header, runs, wanted_keys):
 
   Used by `benchmarks/final_training.py --reuse_rows_from`. A row qualifies when the file's
   final training, initialisation offset and judging resolution (absent: the run's) equal
-  `header`'s (otherwise a ValueError: all its
-  rows are other models), its key (strategy, seed, views, steps, train_seed) is in
-  `wanted_keys`, it was trained (not read from a run record), and its run in the file's own
-  results.json chose the same first `views` views as this call's run of that (strategy,
-  seed) in `runs`. Each comes back marked with `reused_from`.
+  `header`'s (otherwise a ValueError: all its rows are other models), its key (strategy,
+  seed, views, steps, train_seed) is in `wanted_keys`, it was trained (not read from a run
+  record), and its run in the file's own results.json chose the same first `views` views as
+  this call's run of that (strategy, seed) in `runs`. Each comes back marked with
+  `reused_from`.
   """
   with open(path) as f:
     old = json.load(f)
