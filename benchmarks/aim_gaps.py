@@ -187,7 +187,7 @@ def _plot(rows, views, path):
                          "(filled: all seeds, open: some)",
                          fontsize=7)
   fig.tight_layout()
-  fig.savefig(path, dpi=120)
+  fig.savefig(path, dpi=120, bbox_inches="tight")  # The longest labels would touch the edge.
   plt.close(fig)
   print(f"wrote {path}")
 
