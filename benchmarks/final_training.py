@@ -214,9 +214,10 @@ def main(argv):
             "config": config_flags.get_config_filename(flags.FLAGS["config"]),
             "final_train": json.loads(config.final_train.to_json_best_effort()),
             "init_offset": _INIT_OFFSET.value, "reuse_run": _REUSE_RUN.value}
-  if pool_record(pool)["resolution"] != results.get("resolution"):
+  resolution = pool_record(pool)["resolution"]
+  if resolution != results.get("resolution"):
     # Models of another image size than the run's: never the same rows as the run's size.
-    header["judge_resolution"] = pool_record(pool)["resolution"]
+    header["judge_resolution"] = resolution
     if _REUSE_RUN.value:
       raise ValueError("--reuse_run takes the run's own models, which saw the run's image "
                        "size, not the config's.")

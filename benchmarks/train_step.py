@@ -215,7 +215,7 @@ def main(argv):
                           "resolution": first["resolution"],
                           "from_checkpoints": _FROM.value, "live_gaussians": first["live"],
                           "points": _POINTS.value, "samples": _SAMPLES.value,
-                          "steps": _STEPS.value, "cpu_count": os.cpu_count(),
+                          "steps": _STEPS.value,
                           "load_end": _load()})
   print(f"saved {_OUT.value}")
 
