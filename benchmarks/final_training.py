@@ -185,6 +185,7 @@ def main(argv):
     pool_record,
     selected_from_record,
   )
+  from mfsample.train.loop import without_speed_only_fields
 
   if _INITS.value < 1:
     raise ValueError(f"--inits must be at least 1, not {_INITS.value}.")
@@ -212,7 +213,8 @@ def main(argv):
   # of initialisations may change between calls on one file (more rows of the same kind).
   header = {"results": _RESULTS.value,
             "config": config_flags.get_config_filename(flags.FLAGS["config"]),
-            "final_train": json.loads(config.final_train.to_json_best_effort()),
+            "final_train": without_speed_only_fields(
+                json.loads(config.final_train.to_json_best_effort())),
             "init_offset": _INIT_OFFSET.value, "reuse_run": _REUSE_RUN.value}
   resolution = pool_record(pool)["resolution"]
   if resolution != results.get("resolution"):

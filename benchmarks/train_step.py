@@ -9,6 +9,13 @@ the machine's load between rounds does not bias the ratios. Densification is off
 measures the jitted step (paper Tab. 4 measures the same thing per iteration).
 
   PYTHONPATH=. python benchmarks/train_step.py --rounds=2 --out=results/train_step.json
+
+A variant `NAME@C` composites C chunks per loop step (`render.chunks_per_step`, a speed
+knob) and takes its ratio to `deterministic@C`; on a GPU, where small steps are bound by
+launch latency, sweep it at the paper's scale:
+
+  PYTHONPATH=. python benchmarks/train_step.py --size=400 --points=100000 --rounds=1 \
+      --variants=deterministic@16,deterministic@64,deterministic@256,deterministic@1024
 """
 
 import dataclasses
@@ -25,7 +32,8 @@ from absl import app, flags
 
 _VARIANTS = flags.DEFINE_list(
     "variants", ["deterministic", "diagonal", "block", "rank1", "rank2", "rank4", "rank10"],
-    "Variants: deterministic, diagonal, block, rankK.")
+    "Variants: deterministic, diagonal, block, rankK; each optionally @C, compositing C "
+    "chunks per step (render.chunks_per_step, default the config's), e.g. rank2@256.")
 _ROUNDS = flags.DEFINE_integer("rounds", 2, "Interleaved rounds over all variants.")
 _STEPS = flags.DEFINE_integer("steps", 20, "Timed steps per variant and round.")
 _WARMUP = flags.DEFINE_integer("warmup", 3, "Untimed steps after compilation.")
@@ -43,10 +51,13 @@ _OUT = flags.DEFINE_string("out", "results/train_step.json", "Output JSON.")
 _CHILD = flags.DEFINE_string("child", None, "Internal: run one variant and print JSON.")
 
 
-def _config(variant):
+def _config(cell):
   from configs import train_lego
 
   config = train_lego.get_config()
+  variant, _, chunks_per_step = cell.partition("@")
+  if chunks_per_step:
+    config.render.chunks_per_step = int(chunks_per_step)
   if variant == "deterministic":
     config.sampler.kind = "deterministic"
   elif variant in ("diagonal", "block"):
@@ -150,6 +161,7 @@ def _child(variant):
       "peak_rss_mb": usage.ru_maxrss / 1024.0, "seconds_total": time.perf_counter() - t0,
       "capacity": int(state.model.capacity), "live": int(np.sum(np.asarray(state.model.mask))),
       "budget": setup.step_config.settings.max_intersections,
+      "chunks_per_step": setup.step_config.settings.chunks_per_step,
       "params_per_gaussian": int(sum(np.prod(x.shape[1:]) for x in
                                      jax.tree.leaves(state.model.params))),
       "resolution": int(views.images.shape[1]),
@@ -186,24 +198,25 @@ def main(argv):
       res = json.loads(out.stdout.strip().splitlines()[-1])
       res["load_before"] = load
       results[variant] = res
-      print(f"round {r} {variant:>13}: {res['ms_median']:8.1f} ms/step  "
+      print(f"round {r} {variant:>16}: {res['ms_median']:8.1f} ms/step  "
             f"peak {res['peak_rss_mb']:7.0f} MB  (load {load[0]:.2f})", flush=True)
     rounds.append(results)
 
-  base = "deterministic"
   table = {}
   for variant in _VARIANTS.value:
     ms = [r[variant]["ms_median"] for r in rounds]
     row = {"ms_per_step": statistics.median(ms), "ms_rounds": ms,
            "peak_rss_mb": max(r[variant]["peak_rss_mb"] for r in rounds),
-           "params_per_gaussian": rounds[0][variant]["params_per_gaussian"]}
+           "params_per_gaussian": rounds[0][variant]["params_per_gaussian"],
+           "chunks_per_step": rounds[0][variant]["chunks_per_step"]}
+    base = "deterministic" + variant[len(variant.partition("@")[0]):]  # same @C
     if base in rounds[0]:
       row["ratio"] = statistics.median(r[variant]["ms_median"] / r[base]["ms_median"]
                                        for r in rounds)
     table[variant] = row
-  print(f"\n{'variant':>13} | {'ms/step':>8} | {'ratio':>6} | {'peak RSS MB':>11} | params/G")
+  print(f"\n{'variant':>16} | {'ms/step':>8} | {'ratio':>6} | {'peak RSS MB':>11} | params/G")
   for variant, row in table.items():
-    print(f"{variant:>13} | {row['ms_per_step']:8.1f} | {row.get('ratio', float('nan')):6.3f} | "
+    print(f"{variant:>16} | {row['ms_per_step']:8.1f} | {row.get('ratio', float('nan')):6.3f} | "
           f"{row['peak_rss_mb']:11.0f} | {row['params_per_gaussian']}")
   first = rounds[0][_VARIANTS.value[0]]
   import jax  # After the children: only to name the device the figures were taken on.

@@ -123,6 +123,10 @@ def get_config():
   render.max_intersections = 1 << 16  # Initial budget; grown (power of 2) on overflow.
   render.max_budget = 1 << 24  # Refuse to grow beyond this (error, never truncation).
   render.tile_size = 16  # Screen tile side in pixels.
+  # Chunks of 32 Gaussians per step of the compositing loop: speed only (images agree to
+  # float rounding). 16 is fastest on CPU (`benchmarks/render.py --chunks_per_step`); a GPU,
+  # where each step's launch latency dominates small steps, may want many more.
+  render.chunks_per_step = 16
 
   # ----------------------------------------------------------------- training
   config.train = train = ml_collections.ConfigDict()  # The loop.

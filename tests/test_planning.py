@@ -434,6 +434,21 @@ def test_resume_guard_reads_a_field_added_later_as_the_old_behaviour(tmp_path):
     runner._check_resumable(config, str(tmp_path))
 
 
+def test_resume_guard_ignores_speed_only_fields(tmp_path):
+  config = tiny_config()
+  (tmp_path / "runs").mkdir()
+  (tmp_path / "runs" / "random-seed0.json").write_text("{}")
+  old = json.loads(config.to_json_best_effort())
+  del old["final_train"]["render"]["chunks_per_step"]  # written before the field existed
+  (tmp_path / "config.json").write_text(json.dumps(old))
+  config.round_train.render.chunks_per_step = 64
+  config.final_train.render.chunks_per_step = 256
+  runner._check_resumable(config, str(tmp_path))  # the same runs, only faster or slower
+  config.final_train.render.tile_size = 8
+  with pytest.raises(ValueError, match=r"differences: final_train\.render\.tile_size\)"):
+    runner._check_resumable(config, str(tmp_path))
+
+
 def test_table_layout_has_mean_and_std():
   records = [{"strategy": "ours_sel", "label": "Ours (Sel.)", "seed": s,
               "metrics": {"5": {"psnr": 20.0 + s, "ssim": 0.8, "lpips": 0.1}}}

@@ -302,6 +302,29 @@ def test_resumed_run_matches_an_uninterrupted_one(tiny_dataset, tmp_path):
     assert json.load(f)["train_seconds"] == pytest.approx(metrics["train_seconds"], abs=1.0)
 
 
+def test_chunks_per_step_changes_speed_not_training(tiny_dataset, tmp_path):
+  """`render.chunks_per_step` is a speed knob: runs agree to float rounding, a checkpoint
+  resumes under another value, and result headers leave it out."""
+  base = resume_config()  # a budget (512) that must grow, and a checkpoint at step 8
+  wide = resume_config()
+  wide.render.chunks_per_step = 64  # 2048 pairs a step: the 512 start is rounded up
+  assert loop.render_settings(wide.render).max_intersections == 2048
+  a = loop.train(base, tiny_dataset.train, bounds=tiny_dataset.bounds)
+  directory = str(tmp_path / "checkpoints")
+  loop.train(base, tiny_dataset.train, bounds=tiny_dataset.bounds, checkpoint_dir=directory,
+             stop_at=11)  # its checkpoint (step 8) holds a budget of 16-chunk steps
+  b = loop.train(wide, tiny_dataset.train, bounds=tiny_dataset.bounds,
+                 checkpoint_dir=directory)
+  assert b.setup.step_config.settings.chunks_per_step == 64
+  assert b.setup.step_config.settings.max_intersections % (32 * 64) == 0
+  for x, y in zip(jax.tree.leaves(a.state), jax.tree.leaves(b.state), strict=True):
+    np.testing.assert_allclose(np.asarray(x), np.asarray(y), rtol=1e-3, atol=1e-4)
+  as_json = lambda c: json.loads(c.to_json_best_effort())
+  assert as_json(base) != as_json(wide)
+  assert loop.without_speed_only_fields(as_json(base)) == loop.without_speed_only_fields(
+      as_json(wide))
+
+
 def test_two_samples_per_step(tiny_dataset):
   """M = 2: both samples are rendered (sequentially) and the data term is their mean."""
   run = Run(tiny_config("lowrank", **{"sampler.num_samples": 2}), tiny_dataset)

@@ -44,6 +44,7 @@ from mfsample.planning import figures, poses, strategies, training, variance
 from mfsample.planning.pool import Pool, make_pool, stack_cameras
 from mfsample.render import render
 from mfsample.render.budget import render_with_budget
+from mfsample.train.loop import SPEED_ONLY_FIELDS
 
 
 class Selected(NamedTuple):
@@ -611,9 +612,12 @@ def seconds_markdown(summary, labels, order=strategies.NAMES):
 # ------------------------------------------------------------------ the loop
 
 
-# Fields that may change between calls on one workdir: which runs to do, and presentation.
+# Fields that may change between calls on one workdir: which runs to do, presentation,
+# and the training configs' speed-only fields (`mfsample.train.loop.SPEED_ONLY_FIELDS`).
 _RESUME_FREE_FIELDS = ("seeds", "strategies", "progress", "figures", "data.progress",
-                       "paired_references")
+                       "paired_references") + tuple(
+                           f"{train}.{field}" for train in ("round_train", "final_train")
+                           for field in SPEED_ONLY_FIELDS)
 
 
 # Fields added to the planning config after workdirs were first written, each with the

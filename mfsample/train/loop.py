@@ -7,6 +7,7 @@ events of 3DGS (densification, opacity reset) and checkpoints between steps.
 """
 
 import dataclasses
+import json
 import os
 import time
 from typing import NamedTuple
@@ -17,7 +18,7 @@ import numpy as np
 
 from mfsample._json import write_json
 from mfsample.model import GROUPS, SamplerSpec, group_shapes, init_model
-from mfsample.render.budget import BudgetExceededError, fit_budget
+from mfsample.render.budget import BudgetExceededError, fit_budget, round_up_budget
 from mfsample.render.settings import RenderSettings
 from mfsample.samplers import sobol_z
 from mfsample.train import checkpoint as ckpt
@@ -63,6 +64,36 @@ def sampler_spec(config, extent, sh_degree):
                      bounds=bounds)
 
 
+# Training-config fields that change only how fast a run goes, never what it computes
+# (beyond float rounding): a resumed run or a reused result may differ in them.
+SPEED_ONLY_FIELDS = ("render.chunks_per_step",)
+
+
+def without_speed_only_fields(train_config_dict):
+  """A training config as a JSON dict, less `SPEED_ONLY_FIELDS`: what results depend on."""
+  d = json.loads(json.dumps(train_config_dict))
+  for field in SPEED_ONLY_FIELDS:
+    *parents, leaf = field.split(".")
+    node = d
+    for p in parents:
+      node = node.get(p, {})
+    node.pop(leaf, None)
+  return d
+
+
+def render_settings(render_config):
+  """`RenderSettings` of a training config's `render` block.
+
+  The initial budget is rounded up to a whole number of compositing steps
+  (chunk_size x chunks_per_step), so any `chunks_per_step` is valid with any start.
+  """
+  chunks_per_step = int(render_config.get("chunks_per_step", RenderSettings.chunks_per_step))
+  start = RenderSettings(tile_size=int(render_config.tile_size),
+                         max_intersections=RenderSettings.chunk_size * chunks_per_step,
+                         chunks_per_step=chunks_per_step)
+  return round_up_budget(start, render_config.max_intersections)
+
+
 def make_setup(config, train_views, *, extent=None, key=None):
   """`TrainSetup` for training on `train_views` with `config`.
 
@@ -88,8 +119,7 @@ def make_setup(config, train_views, *, extent=None, key=None):
   volume_weight = config.loss.volume_weight
   if volume_weight is None:
     volume_weight = 1.0 / len(train_views)
-  settings = RenderSettings(max_intersections=int(config.render.max_intersections),
-                            tile_size=int(config.render.tile_size))
+  settings = render_settings(config.render)
   step_config = StepConfig(
       settings=settings,
       background=tuple(float(c) for c in config.data.background),
@@ -161,7 +191,8 @@ def restore_latest(config, setup, bounds, directory):
   template = init_state(config, setup, bounds)
   template = densify_lib.grow_capacity(template, meta["capacity"])
   state, meta = ckpt.restore_checkpoint(paths[-1], template)
-  settings = setup.step_config.settings.replace(max_intersections=meta["max_intersections"])
+  # Rounded: the checkpoint's run may have composited more or fewer chunks per step.
+  settings = round_up_budget(setup.step_config.settings, meta["max_intersections"])
   setup = setup._replace(step_config=dataclasses.replace(setup.step_config, settings=settings))
   return state, setup, meta
 
