@@ -20,7 +20,7 @@ import os
 
 from absl import app, flags
 
-from mfsample.planning import by_seeds, runner
+from mfsample.planning import by_seeds, tables
 
 _OUT = flags.DEFINE_string("out", "results/aim_gaps.json", "JSON output (the figure beside it).")
 AIM_VIEWS = 10  # The issue's aim is stated at 10 views (some records hold no other count).
@@ -133,7 +133,7 @@ def gap(entry, views):
   judge's name with the number of final models per view set)."""
   strategy, reference = entry.comparison
   records = _records(entry)
-  paired = runner.paired_differences(records, [views], reference)
+  paired = tables.paired_differences(records, [views], reference)
   if strategy not in paired or str(views) not in paired[strategy]:
     raise ValueError(f"{entry.path} has no seeds with both {strategy} and {reference} at "
                      f"{views} views")

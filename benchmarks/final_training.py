@@ -92,7 +92,7 @@ def _report(results, rows, steps_list, views, inits):
   """Prints the tables; returns the summary for the JSON."""
   import numpy as np
 
-  from mfsample.planning.runner import paired_differences, paired_markdown
+  from mfsample.planning.tables import paired_differences, paired_markdown
 
   labels = {r["strategy"]: r["label"] for r in rows}
   references = [s for s in _REFERENCES.value if s in labels]

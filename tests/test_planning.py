@@ -23,6 +23,7 @@ from mfsample.planning import (
   poses,
   runner,
   strategies,
+  tables,
   variance,
 )
 from mfsample.planning.pool import stack_cameras
@@ -453,10 +454,10 @@ def test_table_layout_has_mean_and_std():
   records = [{"strategy": "ours_sel", "label": "Ours (Sel.)", "seed": s,
               "metrics": {"5": {"psnr": 20.0 + s, "ssim": 0.8, "lpips": 0.1}}}
              for s in (0, 1)]
-  summary = runner.summarise(records, (5,))
+  summary = tables.summarise(records, (5,))
   assert summary["ours_sel"]["5"]["psnr"]["mean"] == pytest.approx(20.5)
   assert summary["ours_sel"]["5"]["psnr"]["std"] == pytest.approx(0.5)
-  table = runner.table_markdown(summary, (5,))
+  table = tables.table_markdown(summary, (5,))
   assert "| Ours (Sel.) | 20.50 ± 0.50 | 0.800 ± 0.000 | 0.100 ± 0.000 |" in table
 
 
@@ -469,17 +470,17 @@ def test_paired_differences_are_per_seed_and_count_wins():
   records = [rec("farthest", s, 20.0 + 5 * s, 0.2) for s in range(3)]
   records += [rec("ours_sel", s, 20.1 + 5 * s, 0.3 - 0.15 * s) for s in range(3)]
   records.append(rec("ours_sel", 7, 30.0, 0.1))  # No farthest run with seed 7: not paired.
-  paired = runner.paired_differences(records, (10,), "farthest")
+  paired = tables.paired_differences(records, (10,), "farthest")
   e = paired["ours_sel"]["10"]
   assert e["seeds"] == [0, 1, 2] and e["wins"] == 3
   assert e["mean"] == pytest.approx(0.1) and e["sem"] == pytest.approx(0.0, abs=1e-9)
   assert "farthest" not in paired
-  lp = runner.paired_differences(records, (10,), "farthest", metric="lpips")["ours_sel"]["10"]
+  lp = tables.paired_differences(records, (10,), "farthest", metric="lpips")["ours_sel"]["10"]
   assert lp["values"] == pytest.approx([0.1, -0.05, -0.2]) and lp["wins"] == 2  # lower wins
   labels = {"farthest": "Farthest", "ours_sel": "Ours (Sel.)"}
-  table = runner.paired_markdown(paired, labels, "Farthest", (10,))
+  table = tables.paired_markdown(paired, labels, "Farthest", (10,))
   assert "| Ours (Sel.) | +0.10 ± 0.00 (better in 3/3) |" in table
-  one = runner.paired_differences(records[:1] + records[3:4], (10,), "farthest")
+  one = tables.paired_differences(records[:1] + records[3:4], (10,), "farthest")
   assert one["ours_sel"]["10"]["sem"] is None
 
 
@@ -505,13 +506,13 @@ def test_optimisation_summary_counts_rounds_and_kept_poses():
   records = [{"strategy": "ours_opt_sel", "optimisation": opt},
              {"strategy": "ours_opt_best", "optimisation": best},
              {"strategy": "farthest", "optimisation": [{}, {}, {}]}]
-  summary = runner.optimisation_summary(records + records[:1])
+  summary = tables.optimisation_summary(records + records[:1])
   assert set(summary) == {"ours_opt_sel", "ours_opt_best"}
   assert summary["ours_opt_sel"] == {"rounds": 4, "u_rose": 2, "u_end_over_start": 1.75}
   assert summary["ours_opt_best"] == {"rounds": 2, "u_rose": 1, "u_end_over_start": 1.75,
                                       "kept_moved": 1, "kept_steps": {"0": 1, "20": 1},
                                       "kept_over_start": 1.25}
-  table = runner.optimisation_markdown(summary, {"ours_opt_sel": "O", "ours_opt_best": "B"})
+  table = tables.optimisation_markdown(summary, {"ours_opt_sel": "O", "ours_opt_best": "B"})
   assert "| O | 4 | 2 | 1.750 | - | - |" in table and "| B | 2 | 1 | 1.750 | 1 | 1.250 |" in table
 
 
@@ -520,11 +521,11 @@ def test_seconds_summary_spreads_runs_and_rounds_after_the_first():
              {"strategy": "ours_sel", "seconds": 10.0, "round_seconds": [0.0, 2.0]},
              {"strategy": "ours_sel", "seconds": 20.0, "round_seconds": [0.0, 6.0]},
              {"strategy": "farthest", "seconds": 5.0, "round_seconds": [0.0]}]
-  summary = runner.seconds_summary(records)
+  summary = tables.seconds_summary(records)
   assert summary["ours_sel"] == {"runs": 3, "run": {"min": 10.0, "median": 20.0, "max": 30.0},
                                  "round": {"min": 2.0, "median": 5.0, "max": 8.0}}
   assert summary["farthest"] == {"runs": 1, "run": {"min": 5.0, "median": 5.0, "max": 5.0}}
-  table = runner.seconds_markdown(summary, {"ours_sel": "S", "farthest": "F"})
+  table = tables.seconds_markdown(summary, {"ours_sel": "S", "farthest": "F"})
   assert "| F | 1 | 5 / 5 / 5 | - |" in table and "| S | 3 | 10 / 20 / 30 | 2 / 5 / 8 |" in table
 
 

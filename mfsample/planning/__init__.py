@@ -6,7 +6,8 @@
   three variants of ours, behind one interface.
 * `runner`: the protocol as pure steps and a thin, resumable loop (`run_camera_planning`;
   `restore_runs` seeds a workdir with a results directory's finished runs).
-* `by_seeds`: the runner's tables over a range of a run's seeds (or of its final models).
+* `tables`: Table 1, the paired differences and the other tables, from run records.
+* `by_seeds`: those tables over a range of a run's seeds (or of its final models).
 """
 
 from mfsample.planning.optimize import (

@@ -3,14 +3,14 @@
 The runner's `table.md` covers all the seeds of a workdir. When seeds were added by a later
 call (a pre-registered one names its outcomes over the new seeds and over all of them), or
 the machine was slower for some, a range of seeds at a time says more. These build the
-runner's own tables (`runner.seconds_markdown`, `runner.paired_markdown`) per range
-`a:b` (seeds a .. b-1), from a run's records or from the rows that
-`benchmarks/final_training.py` writes.
+runner's tables (`tables.seconds_markdown`, `tables.paired_markdown`) per range `a:b`
+(seeds a .. b-1), from a run's records or from the rows that `benchmarks/final_training.py`
+writes.
 """
 
 import numpy as np
 
-from mfsample.planning import runner
+from mfsample.planning import tables
 
 
 def seed_range(text):
@@ -33,7 +33,7 @@ def _labels(records):
 
 
 def seconds_tables(records, ranges, names=()):
-  """Markdown: one `runner.seconds_markdown` table per seed range (of the runs it holds)."""
+  """Markdown: one `tables.seconds_markdown` table per seed range (of the runs it holds)."""
   labels = _labels(records)
   out = []
   for seeds in ranges:
@@ -42,7 +42,7 @@ def seconds_tables(records, ranges, names=()):
       out.append(f"{_title(seeds)}: no runs.\n")
       continue
     out.append(f"{_title(seeds)}:\n\n"
-               + runner.seconds_markdown(runner.seconds_summary(chosen), labels))
+               + tables.seconds_markdown(tables.seconds_summary(chosen), labels))
   return "\n".join(out)
 
 
@@ -64,12 +64,12 @@ def paired_tables(records, ranges, references, views, metric="psnr", per_seed=Fa
   for seeds in ranges:
     chosen = [r for r in records if r["seed"] in seeds]
     for reference in references:
-      paired = runner.paired_differences(chosen, views, reference, metric)
+      paired = tables.paired_differences(chosen, views, reference, metric)
       if not paired:
         out.append(f"{_title(seeds)}: no seeds with {reference} and another strategy.\n")
         continue
       out.append(f"{_title(seeds)}, paired with {labels[reference]} (mean ± standard error):"
-                 "\n\n" + runner.paired_markdown(paired, labels, labels[reference], views,
+                 "\n\n" + tables.paired_markdown(paired, labels, labels[reference], views,
                                                  metric))
       if per_seed:
         out.append(_per_seed_markdown(paired, labels, labels[reference], views, metric))
@@ -80,7 +80,7 @@ def _per_seed_markdown(paired, labels, reference_label, views, metric):
   """One row per strategy and view count: its difference to the reference, seed by seed."""
   seeds = sorted({s for by_n in paired.values() for e in by_n.values() for s in e["seeds"]})
   head = ["Method", "views"] + [f"seed {s}" for s in seeds]
-  label = dict((m, lab) for m, lab, _ in runner.METRICS)[metric]
+  label = dict((m, lab) for m, lab, _ in tables.METRICS)[metric]
   lines = [f"Per seed, Δ{label} vs {reference_label}:", "",
            "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
   for name, by_n in paired.items():
