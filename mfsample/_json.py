@@ -14,6 +14,19 @@ def write_json(path, obj, indent=2):
   os.replace(tmp, path)
 
 
+def without_fields(d, dotted_fields):
+  """A deep copy of the JSON dict `d` less the leaves named by `dotted_fields` ("a.b.c");
+  names that `d` lacks are ignored."""
+  d = json.loads(json.dumps(d))
+  for field in dotted_fields:
+    *parents, leaf = field.split(".")
+    node = d
+    for p in parents:
+      node = node.get(p, {})
+    node.pop(leaf, None)
+  return d
+
+
 def read_resumable_rows(path, header):
   """The rows of an earlier call that wrote `{"header": header, "rows": [...]}` to `path`,
   to resume it; [] when there is no such file. A file of another call (a different header)

@@ -36,7 +36,7 @@ import numpy as np
 
 from mfsample import metrics as metrics_lib
 from mfsample import uncertainty as unc
-from mfsample._json import write_json
+from mfsample._json import without_fields, write_json
 from mfsample.data._io import area_downscale
 from mfsample.data.views import Views
 from mfsample.model import mean_gaussians
@@ -448,13 +448,7 @@ def _comparable_config(config_dict):
     for p in parents:
       node = node.setdefault(p, {})
     node.setdefault(leaf, value)
-  for field in _RESUME_FREE_FIELDS:
-    *parents, leaf = field.split(".")
-    node = d
-    for p in parents:
-      node = node.get(p, {})
-    node.pop(leaf, None)
-  return d
+  return without_fields(d, _RESUME_FREE_FIELDS)
 
 
 def _differences(old, new, prefix=""):

@@ -7,7 +7,6 @@ events of 3DGS (densification, opacity reset) and checkpoints between steps.
 """
 
 import dataclasses
-import json
 import os
 import time
 from typing import NamedTuple
@@ -16,7 +15,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from mfsample._json import write_json
+from mfsample._json import without_fields, write_json
 from mfsample.model import GROUPS, SamplerSpec, group_shapes, init_model
 from mfsample.render.budget import BudgetExceededError, fit_budget, round_up_budget
 from mfsample.render.settings import RenderSettings
@@ -71,14 +70,7 @@ SPEED_ONLY_FIELDS = ("render.chunks_per_step",)
 
 def without_speed_only_fields(train_config_dict):
   """A training config as a JSON dict, less `SPEED_ONLY_FIELDS`: what results depend on."""
-  d = json.loads(json.dumps(train_config_dict))
-  for field in SPEED_ONLY_FIELDS:
-    *parents, leaf = field.split(".")
-    node = d
-    for p in parents:
-      node = node.get(p, {})
-    node.pop(leaf, None)
-  return d
+  return without_fields(train_config_dict, SPEED_ONLY_FIELDS)
 
 
 def render_settings(render_config):
