@@ -107,6 +107,8 @@ def _entries():
       (OPT_SEL, "default", rounds2000, DENSIFIED, "final_2000_densified_default", "all"),
       (OPT_SEL, "default", rounds2000, DENSIFIED_MEAN, "final_2000_densified_default", "all"),
       (OPT_BEST, "default", rounds2000, FINAL_2000, "final_2000_rounds2000_seeds24", ""),
+      (OPT_BEST, "default", rounds2000, DENSIFIED, "final_2000_densified_default_opt_best",
+       "all"),
   ]:
     out.append(Entry(comparison, scene, protocol, judge, f"{r}{name}.json", fixed))
   # Rows of one scene and protocol together, each judge in the order above.
