@@ -66,11 +66,8 @@ def run_cell(cell, repeats, chunks_per_step=16):
   camera = orbit_camera(res, res, distance=3.5, fov_x=0.9)
   target = jnp.asarray(jax.random.uniform(jax.random.PRNGKey(0), (res, res, 3)))
 
-  # The smallest multiple of one loop step's intersections that holds 4096 (the settings
-  # refuse a budget that is not a whole number of steps); it grows on overflow.
-  quantum = RenderSettings.chunk_size * chunks_per_step
-  start = RenderSettings(max_intersections=-(-(1 << 12) // quantum) * quantum,
-                         chunks_per_step=chunks_per_step)
+  # A start that holds 4096 intersections in whole loop steps; it grows on overflow.
+  start = RenderSettings.holding(1 << 12, chunks_per_step=chunks_per_step)
   out, settings = render_with_budget(render, start, gaussians, camera)
 
   def loss(g, cam):

@@ -209,7 +209,8 @@ def main(argv):
            "peak_rss_mb": max(r[variant]["peak_rss_mb"] for r in rounds),
            "params_per_gaussian": rounds[0][variant]["params_per_gaussian"],
            "chunks_per_step": rounds[0][variant]["chunks_per_step"]}
-    base = "deterministic" + variant[len(variant.partition("@")[0]):]  # same @C
+    _, at, chunks_per_step = variant.partition("@")
+    base = f"deterministic{at}{chunks_per_step}"  # the same loop step as `variant`
     if base in rounds[0]:
       row["ratio"] = statistics.median(r[variant]["ms_median"] / r[base]["ms_median"]
                                        for r in rounds)

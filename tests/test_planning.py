@@ -422,13 +422,18 @@ def test_final_models_densify_when_their_config_asks():
   assert np.isfinite(metrics["psnr"])
 
 
+def _workdir_with_a_run(workdir, config_dict):
+  """`workdir` as an earlier call with `config_dict` left it: its config and one run."""
+  (workdir / "runs").mkdir()
+  (workdir / "runs" / "random-seed0.json").write_text("{}")
+  (workdir / "config.json").write_text(json.dumps(config_dict))
+
+
 def test_resume_guard_reads_a_field_added_later_as_the_old_behaviour(tmp_path):
   config = tiny_config()
-  (tmp_path / "runs").mkdir()
-  (tmp_path / "runs" / "random-seed0.json").write_text("{}")
   old = json.loads(config.to_json_best_effort())
   del old["strategy"]["optimize"]["resample_z"]  # written before the field existed
-  (tmp_path / "config.json").write_text(json.dumps(old))
+  _workdir_with_a_run(tmp_path, old)
   runner._check_resumable(config, str(tmp_path))  # False is what those runs did: resumes
   config.strategy.optimize.resample_z = True
   with pytest.raises(ValueError, match=r"differences: strategy\.optimize\.resample_z\)"):
@@ -437,11 +442,9 @@ def test_resume_guard_reads_a_field_added_later_as_the_old_behaviour(tmp_path):
 
 def test_resume_guard_ignores_speed_only_fields(tmp_path):
   config = tiny_config()
-  (tmp_path / "runs").mkdir()
-  (tmp_path / "runs" / "random-seed0.json").write_text("{}")
   old = json.loads(config.to_json_best_effort())
   del old["final_train"]["render"]["chunks_per_step"]  # written before the field existed
-  (tmp_path / "config.json").write_text(json.dumps(old))
+  _workdir_with_a_run(tmp_path, old)
   config.round_train.render.chunks_per_step = 64
   config.final_train.render.chunks_per_step = 256
   runner._check_resumable(config, str(tmp_path))  # the same runs, only faster or slower

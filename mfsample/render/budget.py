@@ -15,19 +15,10 @@ class BudgetExceededError(RuntimeError):
   """Raised when a render overflowed and growing the budget is not allowed."""
 
 
-def round_up_budget(settings: RenderSettings, budget: int) -> RenderSettings:
-  """`settings` with the budget `budget` rounded up to a whole number of compositing steps
-  (chunk_size x chunks_per_step), the only budgets `RenderSettings` accepts."""
-  quantum = settings.chunk_size * settings.chunks_per_step
-  return settings.replace(max_intersections=max(1, -(-int(budget) // quantum)) * quantum)
-
-
 def required_budget(settings: RenderSettings, stats) -> int:
   """The smallest valid power-of-two budget that holds `stats` (max over any batch axes)."""
   need = int(np.max(np.asarray(stats.num_padded)))
-  quantum = settings.chunk_size * settings.chunks_per_step
-  budget = max(quantum, 1 << max(need - 1, 0).bit_length())
-  return -(-budget // quantum) * quantum
+  return settings.holding_budget(1 << max(need - 1, 0).bit_length()).max_intersections
 
 
 def fit_budget(settings: RenderSettings, stats, *, allow_shrink=False) -> RenderSettings:

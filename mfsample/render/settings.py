@@ -62,5 +62,19 @@ class RenderSettings:
   def max_chunks(self):
     return self.max_intersections // self.chunk_size
 
+  @classmethod
+  def holding(cls, budget, **fields):
+    """Settings with `fields` whose budget is the smallest whole number of compositing
+    steps (chunk_size x chunks_per_step intersections) that holds `budget`."""
+    step = (fields.get("chunk_size", cls.chunk_size)
+            * fields.get("chunks_per_step", cls.chunks_per_step))
+    return cls(max_intersections=max(1, -(-int(budget) // step)) * step, **fields)
+
+  def holding_budget(self, budget):
+    """These settings with the smallest valid budget that holds `budget`."""
+    fields = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)
+              if f.name != "max_intersections"}
+    return RenderSettings.holding(budget, **fields)
+
   def replace(self, **changes):
     return dataclasses.replace(self, **changes)

@@ -17,7 +17,7 @@ import numpy as np
 
 from mfsample._json import without_fields, write_json
 from mfsample.model import GROUPS, SamplerSpec, group_shapes, init_model
-from mfsample.render.budget import BudgetExceededError, fit_budget, round_up_budget
+from mfsample.render.budget import BudgetExceededError, fit_budget
 from mfsample.render.settings import RenderSettings
 from mfsample.samplers import sobol_z
 from mfsample.train import checkpoint as ckpt
@@ -80,10 +80,9 @@ def render_settings(render_config):
   (chunk_size x chunks_per_step), so any `chunks_per_step` is valid with any start.
   """
   chunks_per_step = int(render_config.get("chunks_per_step", RenderSettings.chunks_per_step))
-  start = RenderSettings(tile_size=int(render_config.tile_size),
-                         max_intersections=RenderSettings.chunk_size * chunks_per_step,
-                         chunks_per_step=chunks_per_step)
-  return round_up_budget(start, render_config.max_intersections)
+  return RenderSettings.holding(render_config.max_intersections,
+                                tile_size=int(render_config.tile_size),
+                                chunks_per_step=chunks_per_step)
 
 
 def make_setup(config, train_views, *, extent=None, key=None):
@@ -184,7 +183,7 @@ def restore_latest(config, setup, bounds, directory):
   template = densify_lib.grow_capacity(template, meta["capacity"])
   state, meta = ckpt.restore_checkpoint(paths[-1], template)
   # Rounded: the checkpoint's run may have composited more or fewer chunks per step.
-  settings = round_up_budget(setup.step_config.settings, meta["max_intersections"])
+  settings = setup.step_config.settings.holding_budget(meta["max_intersections"])
   setup = setup._replace(step_config=dataclasses.replace(setup.step_config, settings=settings))
   return state, setup, meta
 
