@@ -85,3 +85,14 @@ def test_no_valid_gaussians_gives_an_empty_layout():
   layout = intersect_tiles(proj, W, H, settings)
   assert int(layout.num_chunks) == 0 and not np.any(np.asarray(layout.live))
   assert int(layout.stats.num_intersections) == 0 and not bool(layout.stats.overflow)
+
+
+def test_pair_sort_is_by_tile_then_rank_with_and_without_key_packing():
+  rng = np.random.default_rng(0)
+  rank = np.sort(rng.integers(0, 500, 3000)).astype(np.int32)  # emitted front to back
+  for num_tiles in (40, 1 << 22):  # packed into one int32 key; too many tiles to pack
+    tile = rng.integers(0, min(num_tiles, 1000) + 1, 3000).astype(np.int32)
+    got = tiles._sort_by_tile_then_rank(jnp.asarray(tile), jnp.asarray(rank), num_tiles, 500)
+    order = np.lexsort((rank, tile))
+    np.testing.assert_array_equal(np.asarray(got[0]), tile[order])
+    np.testing.assert_array_equal(np.asarray(got[1]), rank[order])
