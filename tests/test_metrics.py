@@ -33,6 +33,26 @@ def test_ssim_identical_is_one_and_known_constant_value():
   assert float(metrics.ssim(x, _image(1))) < 0.2  # unrelated noise
 
 
+def test_ssim_matches_dm_pix_default_filter_in_value_and_gradient():
+  # Our window filter (banded matrix products) must be dm-pix's own Gaussian, not a lookalike.
+  import dm_pix
+
+  for shape in ((23, 31, 3), (2, 40, 17, 3)):
+    a, b = _image(0, shape), _image(1, shape)
+    b = 0.7 * a + 0.3 * b  # correlated, so SSIM is far from 0 and 1
+    ours, ref = metrics.ssim(a, b), dm_pix.ssim(a, b)
+    g_ours = jax.grad(lambda x, b=b: jnp.sum(metrics.ssim(x, b)))(a)
+    g_ref = jax.grad(lambda x, b=b: jnp.sum(dm_pix.ssim(x, b)))(a)
+    np.testing.assert_allclose(np.asarray(ours), np.asarray(ref), rtol=1e-5)
+    np.testing.assert_allclose(np.asarray(g_ours), np.asarray(g_ref), rtol=1e-4,
+                               atol=1e-4 * float(jnp.max(jnp.abs(g_ref))))
+
+
+def test_ssim_refuses_images_smaller_than_its_window():
+  with pytest.raises(ValueError, match="at least 11 x 11"):
+    metrics.ssim(_image(0, (10, 24, 3)), _image(1, (10, 24, 3)))
+
+
 def test_ssim_gradient_is_finite_at_identical_and_constant_images():
   x = _image()
   for a, b in ((x, x), (jnp.zeros_like(x), jnp.zeros_like(x)), (jnp.ones_like(x), x)):
