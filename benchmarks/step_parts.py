@@ -20,7 +20,8 @@ import time
 
 from absl import app, flags
 
-_SIZES = flags.DEFINE_list("ssim_sizes", ["64", "200", "400"], "Square image sides.")
+_SIZES = flags.DEFINE_list("ssim_sizes", ["64", "200", "400", "800", "1600"],
+                          "Square image sides.")
 _PAIRS = flags.DEFINE_list("pairs", ["65536", "1048576"],
                            "Intersection budgets (pairs sorted per render).")
 _REPEATS = flags.DEFINE_integer("repeats", 9, "Timed calls per figure (median).")

