@@ -4,7 +4,7 @@ SSIM comes from dm-pix (DeepMind's image library: the Wang et al. 2004 definitio
 11x11 Gaussian window, sigma 1.5, matching tf.image.ssim and the NeRF literature), because
 a metric we report next to published numbers should be a reviewed, widely used
 implementation rather than our own. Only its window filter is swapped (`_gaussian_blur`):
-the same 11-tap Gaussian applied as banded matrix products, which XLA runs 4-18 times
+the same 11-tap Gaussian applied as banded matrix products, which XLA runs 4-15 times
 faster than dm-pix's vmapped 1D convolutions, value and gradient, on two CPU cores at 64^2
 to 1600^2 (`benchmarks/step_parts.py`); SSIM is in every training step's loss.
 
@@ -56,8 +56,9 @@ def _gaussian_blur(z):
   return _blur_axis(z, axis=-2)
 
 
-# One banded product over a whole axis costs O(side^2) but is the fastest up to ~500 pixels
-# on a CPU; longer axes go in blocks, linear in the side (`benchmarks/step_parts.py`).
+# One banded product over a whole axis costs O(side^2); on a CPU it is faster than blocks
+# up to 200 pixels, level at 400 and slower from 800 (`benchmarks/step_parts.py`), so
+# longer axes go in blocks, whose cost is linear in the side.
 _ONE_PRODUCT_MAX = 512
 _BLUR_BLOCK = 128
 
