@@ -3,8 +3,10 @@
 Ours scores a candidate with M forward renders of sampled models (Eq. 10); FisherRF needs
 the diagonal Fisher information of the candidate's render, i.e. backward passes (here K
 Rademacher probes, one vector-Jacobian product each). Both run on the same model, the same
-candidate cameras and the same render settings, in one process, and the ratio of the
-per-candidate times is reported (median over repeats, after compilation).
+candidate cameras and the same render settings, in one process. Every scorer is compiled
+first, then the timed calls alternate between them (one call of each per round), so a slow
+spell of a shared machine lands on all of them; the medians over rounds and their ratios
+are reported.
 
   PYTHONPATH=. python benchmarks/candidate_scoring.py
   PYTHONPATH=. python benchmarks/candidate_scoring.py --resolution=100 --num_gaussians=5000
@@ -22,20 +24,23 @@ _RES = flags.DEFINE_integer("resolution", 64, "Square image size of the candidat
 _CANDS = flags.DEFINE_integer("num_candidates", 32, "Candidates scored per timed call.")
 _M = flags.DEFINE_integer("samples", 2, "M, samples of ours (paper: 2).")
 _K = flags.DEFINE_list("probes", ["1", "4"], "FisherRF probes per candidate to time.")
-_REPEATS = flags.DEFINE_integer("repeats", 5, "Timed calls (median).")
+_REPEATS = flags.DEFINE_integer("repeats", 7, "Timed rounds (median); one call per scorer each.")
 _OUT = flags.DEFINE_string("out", "results/bench_candidate_scoring.json", "JSON output.")
 
 
-def _median_seconds(fn, repeats):
+def _median_seconds_alternating(fns, repeats):
+  """Median seconds per call of each fn, the calls alternating between them round by round."""
   import jax
 
-  jax.block_until_ready(fn())  # compile + warm up
-  times = []
+  for fn in fns.values():
+    jax.block_until_ready(fn())  # compile + warm up
+  times = {name: [] for name in fns}
   for _ in range(repeats):
-    t0 = time.perf_counter()
-    jax.block_until_ready(fn())
-    times.append(time.perf_counter() - t0)
-  return statistics.median(times)
+    for name, fn in fns.items():
+      t0 = time.perf_counter()
+      jax.block_until_ready(fn())
+      times[name].append(time.perf_counter() - t0)
+  return {name: statistics.median(t) for name, t in times.items()}
 
 
 def run():
@@ -75,23 +80,29 @@ def run():
   result = {"num_gaussians": n, "resolution": res, "num_candidates": b, "samples": _M.value,
             "budget": settings.max_intersections, "device": str(jax.devices()[0]),
             "platform": platform.platform(), "cpu_count": os.cpu_count()}
-  t_ours = _median_seconds(ours, _REPEATS.value) / b
-  result["ours_seconds_per_candidate"] = t_ours
-  print(f"ours (M={_M.value} forward renders): {1e3 * t_ours:.2f} ms per candidate")
   inverse = jax.tree.map(lambda x: jnp.ones_like(x), {g: det.params.mean[g]
                                                       for g in fisher.DEFAULT_GROUPS
                                                       if g in det.params.mean})
-  for k in (int(x) for x in _K.value):
+
+  def fisher_scorer(k):
     @jax.jit
-    def fisher_candidates(key, k=k):
+    def fisher_candidates(key):
       def one(camera, inv):
         h, _ = fisher.fisher_diagonal(det, camera, key, num_probes=k, settings=settings,
                                       background=bg, groups=tuple(inv))
         return sum(jnp.sum(h[g] * inv[g]) for g in h)
       return unc.map_cameras(one, cams, inverse)
+    return lambda: fisher_candidates(jax.random.PRNGKey(1))
 
-    t_f = _median_seconds(lambda f=fisher_candidates: f(jax.random.PRNGKey(1)),
-                          _REPEATS.value) / b
+  probes = [int(x) for x in _K.value]
+  scorers = {"ours": ours, **{f"fisher_{k}": fisher_scorer(k) for k in probes}}
+  seconds = _median_seconds_alternating(scorers, _REPEATS.value)
+  t_ours = seconds["ours"] / b
+  result["ours_seconds_per_candidate"] = t_ours
+  result["repeats"] = _REPEATS.value
+  print(f"ours (M={_M.value} forward renders): {1e3 * t_ours:.2f} ms per candidate")
+  for k in probes:
+    t_f = seconds[f"fisher_{k}"] / b
     result[f"fisher_{k}_probes_seconds_per_candidate"] = t_f
     result[f"ratio_fisher_{k}_probes_over_ours"] = t_f / t_ours
     print(f"FisherRF ({k} probe backward passes): {1e3 * t_f:.2f} ms per candidate, "
