@@ -11,8 +11,9 @@ measures the jitted step (paper Tab. 4 measures the same thing per iteration).
   PYTHONPATH=. python benchmarks/train_step.py --rounds=2 --out=results/train_step.json
 
 A variant `NAME@C` composites C chunks per loop step (`render.chunks_per_step`, a speed
-knob) and takes its ratio to `deterministic@C`; on a GPU, where small steps are bound by
-launch latency, sweep it at the paper's scale:
+knob) and takes its ratio to `deterministic@C`; every variant also gets its ratio to the
+first one listed (`vs_first`, within a round), which compares the C of a sweep. On a GPU,
+where small steps are bound by launch latency, sweep it at the paper's scale:
 
   PYTHONPATH=. python benchmarks/train_step.py --size=400 --points=100000 --rounds=1 \
       --variants=deterministic@16,deterministic@64,deterministic@256,deterministic@1024
@@ -214,11 +215,15 @@ def main(argv):
     if base in rounds[0]:
       row["ratio"] = statistics.median(r[variant]["ms_median"] / r[base]["ms_median"]
                                        for r in rounds)
+    first_variant = _VARIANTS.value[0]
+    row["vs_first"] = statistics.median(r[variant]["ms_median"] / r[first_variant]["ms_median"]
+                                        for r in rounds)
     table[variant] = row
-  print(f"\n{'variant':>16} | {'ms/step':>8} | {'ratio':>6} | {'peak RSS MB':>11} | params/G")
+  print(f"\n{'variant':>16} | {'ms/step':>8} | {'ratio':>6} | {'vs_first':>8} | "
+        f"{'peak RSS MB':>11} | params/G")
   for variant, row in table.items():
     print(f"{variant:>16} | {row['ms_per_step']:8.1f} | {row.get('ratio', float('nan')):6.3f} | "
-          f"{row['peak_rss_mb']:11.0f} | {row['params_per_gaussian']}")
+          f"{row['vs_first']:8.3f} | {row['peak_rss_mb']:11.0f} | {row['params_per_gaussian']}")
   first = rounds[0][_VARIANTS.value[0]]
   import jax  # After the children: only to name the device the figures were taken on.
 
