@@ -87,6 +87,7 @@ _job() {
 }
 
 _collect() {
+  : "${OUT:?OUT must name the folder whose files come back (the device tool sets it)}"
   sleep "${1:-0}"
   mkdir -p "$OUT"
   [[ -d "$LEASE_DIR" ]] || { echo "no job started here ($LEASE_DIR missing)"; return 1; }
