@@ -18,8 +18,9 @@ default scene) for the round models that the protocol trains:
   PYTHONPATH=. python benchmarks/uncertainty_error.py
   PYTHONPATH=. python benchmarks/uncertainty_error.py --steps=150,400,600 --samples=2,8
 
-Every sampler and M other than the first listed is paired with it, case by case (printed
-and saved); `--summarize=OUT.json` prints those pairings again from a saved output.
+Every round length, sampler and M other than the first listed is paired with it, case by
+case (printed and saved); `--summarize=OUT.json` prints them again from a saved output,
+with each row's mean per seed.
 
   PYTHONPATH=. python benchmarks/uncertainty_error.py --steps=400 --samples=2,8 \
       --seeds=0,1,2,3,4,5,6,7 --samplers=lowrank:2,lowrank:1,lowrank:4,lowrank:10,diagonal,block \
@@ -45,8 +46,13 @@ _SEEDS = flags.DEFINE_list("seeds", ["0", "1"], "Seeds (initial view, model init
 _VIEWS = flags.DEFINE_list("views", ["1", "3", "6", "9"], "Training-view counts.")
 _OUT = flags.DEFINE_string("out", "results/uncertainty_error.json", "JSON output.")
 _SUMMARIZE = flags.DEFINE_string(
-    "summarize", None, "Only print the paired differences of an earlier output (a JSON of "
-    "this script) and stop; rows without a sampler (older outputs) are rank 2 lowrank.")
+    "summarize", None, "Only print each row's mean per seed and the paired differences of an "
+    "earlier output (a JSON of this script), and stop; rows without a sampler (older "
+    "outputs) are the config's rank-2 lowrank.")
+
+
+# What a row varies; `_paired` pairs each with its first value, the others held equal.
+_SETTINGS = ("round_steps", "sampler_flag", "samples")
 
 
 def _farthest_views(pool, config, seed, num_views):
@@ -134,7 +140,7 @@ def run():
   return {"config": config_flags.get_config_filename(flags.FLAGS["config"]),
           "scene": pool.name, "seeds": seeds, "view_counts": counts,
           "cases_per_row": len(seeds) * len(counts), "rows": rows,
-          "paired": _paired(rows, "sampler_flag") + _paired(rows, "samples")}
+          "paired": [entry for field in _SETTINGS for entry in _paired(rows, field)]}
 
 
 def _print_per_seed(rows, seeds):
@@ -149,13 +155,12 @@ def _print_per_seed(rows, seeds):
 
 
 def _paired(rows, field):
-  """rho(U, error) of each value of `field` (the sampler, or M) minus its first value in
-  the rows, paired by case (the same seed and view set) with the other settings equal:
-  mean, standard error and the cases above."""
+  """rho(U, error) of each value of `field` (round length, sampler or M) minus its first
+  value in the rows, paired by case (the same seed and view set) with the other settings
+  equal: mean, standard error and the cases above."""
   import numpy as np
 
-  settings = ("round_steps", "sampler_flag", "samples")
-  others = [f for f in settings if f != field]
+  others = [f for f in _SETTINGS if f != field]
   first = rows[0][field]
   base = {tuple(r[f] for f in others): np.asarray(r["per_case_rho_u_error"])
           for r in rows if r[field] == first}
@@ -164,7 +169,7 @@ def _paired(rows, field):
     if r[field] == first:
       continue
     diff = np.asarray(r["per_case_rho_u_error"]) - base[tuple(r[f] for f in others)]
-    entry = {**{f: r[f] for f in settings}, "minus": {field: first},
+    entry = {**{f: r[f] for f in _SETTINGS}, "minus": {field: first},
              "mean": float(diff.mean()),
              "sem": float(diff.std(ddof=1) / np.sqrt(len(diff))) if len(diff) > 1 else None,
              "cases_above": int(np.sum(diff > 0)), "cases": len(diff)}
@@ -185,8 +190,8 @@ def main(argv):
     for row in rows:  # outputs from before --samplers: the config's rank-2 lowrank
       row.setdefault("sampler_flag", "lowrank:2")
     _print_per_seed(rows, saved["seeds"])
-    _paired(rows, "sampler_flag")
-    _paired(rows, "samples")
+    for field in _SETTINGS:
+      _paired(rows, field)
     return
   from mfsample._json import write_json
   write_json(_OUT.value, run())
