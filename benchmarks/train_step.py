@@ -204,6 +204,7 @@ def main(argv):
     rounds.append(results)
 
   table = {}
+  first_variant = _VARIANTS.value[0]
   for variant in _VARIANTS.value:
     ms = [r[variant]["ms_median"] for r in rounds]
     row = {"ms_per_step": statistics.median(ms), "ms_rounds": ms,
@@ -215,7 +216,6 @@ def main(argv):
     if base in rounds[0]:
       row["ratio"] = statistics.median(r[variant]["ms_median"] / r[base]["ms_median"]
                                        for r in rounds)
-    first_variant = _VARIANTS.value[0]
     row["vs_first"] = statistics.median(r[variant]["ms_median"] / r[first_variant]["ms_median"]
                                         for r in rounds)
     table[variant] = row
@@ -224,7 +224,7 @@ def main(argv):
   for variant, row in table.items():
     print(f"{variant:>16} | {row['ms_per_step']:8.1f} | {row.get('ratio', float('nan')):6.3f} | "
           f"{row['vs_first']:8.3f} | {row['peak_rss_mb']:11.0f} | {row['params_per_gaussian']}")
-  first = rounds[0][_VARIANTS.value[0]]
+  first = rounds[0][first_variant]
   import jax  # After the children: only to name the device the figures were taken on.
 
   from mfsample._json import write_json
