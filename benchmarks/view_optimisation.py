@@ -74,7 +74,8 @@ def main(argv):
   from mfsample import uncertainty as unc
   from mfsample.planning import optimize, poses, strategies
   from mfsample.planning.pool import make_pool
-  from mfsample.planning.runner import Trainer, check_run_matches, selected_from_record
+  from mfsample.planning.runner import Trainer, selected_from_record
+  from mfsample.planning.workdirs import check_run_matches
   from mfsample.render.settings import RenderSettings
 
   config = _CONFIG.value

@@ -203,7 +203,8 @@ def run():
 
   from mfsample._json import write_json
   from mfsample.planning.pool import make_pool
-  from mfsample.planning.runner import check_run_matches, selected_from_record
+  from mfsample.planning.runner import selected_from_record
+  from mfsample.planning.workdirs import check_run_matches
 
   config = _CONFIG.value
   config.data.progress = False

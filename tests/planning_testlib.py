@@ -24,6 +24,16 @@ def tiny_config():
 
 
 @functools.cache
+def tiny_run(workdir, strategies=("random", "farthest")):
+  """A finished tiny planning run in `workdir` (default: two strategies that train no round
+  model, so it is cheap); returns its results.json path."""
+  config = tiny_config()
+  config.strategies = tuple(strategies)
+  config.figures.enabled = False
+  runner.run_camera_planning(config, str(workdir))
+  return workdir / "results.json"
+
+
 def tiny_pool():
   """The synthetic pool of the tiny config (8 candidates, 2 test views, 24 x 24)."""
   return make_pool(tiny_config().data)

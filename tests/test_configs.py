@@ -10,7 +10,7 @@ import pytest
 from absl import flags
 from ml_collections import config_flags
 
-from mfsample.planning import runner
+from mfsample.planning import runner, workdirs
 from mfsample.planning.strategies import NAMES
 
 CONFIGS = ["configs/train_default.py", "configs/train_lego.py", "configs/train_synthetic.py"]
@@ -43,7 +43,7 @@ def test_every_default_field_has_a_comment():
 
 PLANNING_CONFIGS = sorted(p.name for p in (ROOT / "configs").glob("camera_planning*.py"))
 # Configs the README or docs/camera_planning.md run in the workdir of another: they may
-# differ only in the fields that `runner` lets change between calls (seeds, strategies,
+# differ only in the fields that `workdirs` lets change between calls (seeds, strategies,
 # presentation).
 SHARED_WORKDIRS = {"camera_planning_results.py": "camera_planning.py",
                    "camera_planning_seeds8.py": "camera_planning.py",
@@ -80,7 +80,7 @@ def test_round_training_length_is_one_field(name):
 
 
 def _comparable(name):
-  return runner._comparable_config(json.loads(_planning_config(name).to_json_best_effort()))
+  return workdirs.comparable_config(json.loads(_planning_config(name).to_json_best_effort()))
 
 
 @pytest.mark.parametrize("name,base", sorted(SHARED_WORKDIRS.items()))
@@ -122,7 +122,7 @@ COMMITTED_RESULTS = {"camera_planning_default": "camera_planning_results.py",
 @pytest.mark.parametrize("results,name", sorted(COMMITTED_RESULTS.items()))
 def test_committed_results_were_made_with_their_config(results, name):
   recorded = json.loads((ROOT / "results" / results / "config.json").read_text())
-  assert runner._differences(runner._comparable_config(recorded), _comparable(name)) == []
+  assert workdirs.differences(workdirs.comparable_config(recorded), _comparable(name)) == []
 
 
 # Farthest point trains no round model, so the round length cannot change its views or

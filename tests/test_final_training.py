@@ -12,10 +12,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import planning_testlib
 import pytest
-from planning_testlib import tiny_config
-
-from mfsample.planning import runner
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -33,12 +31,7 @@ def _final_training(*args, check=True):
 @pytest.fixture(scope="module")
 def tiny_run(tmp_path_factory):
   """Two strategies that train no round model (cheap), one seed, the tiny protocol."""
-  workdir = tmp_path_factory.mktemp("run")
-  config = tiny_config()
-  config.strategies = ("random", "farthest")
-  config.figures.enabled = False
-  runner.run_camera_planning(config, str(workdir))
-  return workdir / "results.json"
+  return planning_testlib.tiny_run(tmp_path_factory.mktemp("run"))
 
 
 def test_final_training_reproduces_the_run_and_resumes(tiny_run, tmp_path):

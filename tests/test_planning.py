@@ -25,6 +25,7 @@ from mfsample.planning import (
   strategies,
   tables,
   variance,
+  workdirs,
 )
 from mfsample.planning.pool import stack_cameras
 from mfsample.scenes import get_scene
@@ -332,12 +333,12 @@ def test_protocol_runs_end_to_end_and_resumes(tmp_path):
   assert "seconds per run" in table and set(results["run_seconds"]) == set(config.strategies)
   # The benchmarks that reuse a run check its pool against the config's.
   pool = tiny_pool()
-  runner.check_run_matches(pool, results)
+  workdirs.check_run_matches(pool, results)
   with pytest.raises(ValueError, match=r"resolution \[24, 24\] \(the run's \[32, 32\]\)"):
-    runner.check_run_matches(pool, {**results, "resolution": [32, 32]})
-  runner.check_run_matches(pool, {**results, "resolution": [32, 32]}, any_resolution=True)
+    workdirs.check_run_matches(pool, {**results, "resolution": [32, 32]})
+  workdirs.check_run_matches(pool, {**results, "resolution": [32, 32]}, any_resolution=True)
   with pytest.raises(ValueError, match="num_test"):  # ... but only the resolution may differ
-    runner.check_run_matches(pool, {**results, "resolution": [32, 32], "num_test": 99},
+    workdirs.check_run_matches(pool, {**results, "resolution": [32, 32], "num_test": 99},
                              any_resolution=True)
   # A killed run resumes: finished (strategy, seed) runs are read back, not recomputed.
   run_file = tmp_path / "runs" / "random-seed0.json"
@@ -355,23 +356,23 @@ def test_protocol_runs_end_to_end_and_resumes(tmp_path):
   restored_dir = str(tmp_path / "restored")
   os.makedirs(restored_dir)
   (tmp_path / "restored" / "config.json").write_text("{}")  # stale, describing no runs
-  assert runner.restore_runs(str(tmp_path), restored_dir) == first["new_runs"]
+  assert workdirs.restore_runs(str(tmp_path), restored_dir) == first["new_runs"]
   assert (tmp_path / "restored" / "config.json").read_text() == (
       tmp_path / "config.json").read_text()
   restored = runner.run_camera_planning(config, restored_dir)
   assert restored["runs"] == again["runs"]
   assert restored["seconds"]["calls"][:2] == again["seconds"]["calls"]
   assert restored["seconds"]["calls"][2]["new_runs"] == []
-  assert runner.restore_runs(str(tmp_path), restored_dir) == []  # nothing left to restore
+  assert workdirs.restore_runs(str(tmp_path), restored_dir) == []  # nothing left to restore
   with pytest.raises(FileNotFoundError, match="results.json does not exist"):
-    runner.restore_runs(str(tmp_path / "runs"), restored_dir)
+    workdirs.restore_runs(str(tmp_path / "runs"), restored_dir)
   # A call whose runs are all new (another seed) still keeps the earlier calls.
   config.seeds = (1,)
   config.strategies = ("random",)
   third = runner.run_camera_planning(config, str(tmp_path))["seconds"]["calls"]
   assert third[:2] == again["seconds"]["calls"] and third[2]["new_runs"] == ["random-seed1"]
   # Restoring again adds the new run, and of the calls only the one the workdir lacks.
-  assert runner.restore_runs(str(tmp_path), restored_dir) == ["random-seed1"]
+  assert workdirs.restore_runs(str(tmp_path), restored_dir) == ["random-seed1"]
   merged = json.loads((tmp_path / "restored" / "results.json").read_text())["seconds"]["calls"]
   assert merged == restored["seconds"]["calls"] + third[2:]
   # Finished runs of another protocol are never mixed into one table.
@@ -381,7 +382,7 @@ def test_protocol_runs_end_to_end_and_resumes(tmp_path):
   # ... nor restored beside runs of another protocol.
   (tmp_path / "config.json").write_text(config.to_json_best_effort())
   with pytest.raises(ValueError, match=r"different config than .*differences: .*rounds\.steps"):
-    runner.restore_runs(restored_dir, str(tmp_path))
+    workdirs.restore_runs(restored_dir, str(tmp_path))
 
 
 def test_rounds_densify_when_their_config_asks():
@@ -434,10 +435,10 @@ def test_resume_guard_reads_a_field_added_later_as_the_old_behaviour(tmp_path):
   old = json.loads(config.to_json_best_effort())
   del old["strategy"]["optimize"]["resample_z"]  # written before the field existed
   _workdir_with_a_run(tmp_path, old)
-  runner._check_resumable(config, str(tmp_path))  # False is what those runs did: resumes
+  workdirs.check_resumable(config, str(tmp_path))  # False is what those runs did: resumes
   config.strategy.optimize.resample_z = True
   with pytest.raises(ValueError, match=r"differences: strategy\.optimize\.resample_z\)"):
-    runner._check_resumable(config, str(tmp_path))
+    workdirs.check_resumable(config, str(tmp_path))
 
 
 def test_resume_guard_ignores_speed_only_fields(tmp_path):
@@ -447,10 +448,10 @@ def test_resume_guard_ignores_speed_only_fields(tmp_path):
   _workdir_with_a_run(tmp_path, old)
   config.round_train.render.chunks_per_step = 64
   config.final_train.render.chunks_per_step = 256
-  runner._check_resumable(config, str(tmp_path))  # the same runs, only faster or slower
+  workdirs.check_resumable(config, str(tmp_path))  # the same runs, only faster or slower
   config.final_train.render.tile_size = 8
   with pytest.raises(ValueError, match=r"differences: final_train\.render\.tile_size\)"):
-    runner._check_resumable(config, str(tmp_path))
+    workdirs.check_resumable(config, str(tmp_path))
 
 
 def test_table_layout_has_mean_and_std():

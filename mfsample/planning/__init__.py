@@ -4,8 +4,9 @@
 * `optimize`: Adam on -U w.r.t. the camera (the authors' recipe, every number a setting).
 * `strategies`: random, farthest point, ActiveNeRF-style variance, FisherRF, ACP and the
   three variants of ours, behind one interface.
-* `runner`: the protocol as pure steps and a thin, resumable loop (`run_camera_planning`;
-  `restore_runs` seeds a workdir with a results directory's finished runs).
+* `runner`: the protocol as pure steps and a thin, resumable loop (`run_camera_planning`).
+* `workdirs`: what a planning workdir holds and when a later call may add runs to it
+  (`restore_runs` seeds a workdir with a results directory's finished runs).
 * `tables`: Table 1, the paired differences and the other tables, from run records.
 * `by_seeds`: those tables over a range of a run's seeds (or of its final models).
 """
@@ -24,8 +25,9 @@ from mfsample.planning.poses import (
                                         se3_exp,
                                         spherical_camera,
 )
-from mfsample.planning.runner import restore_runs, run_camera_planning
+from mfsample.planning.runner import run_camera_planning
 from mfsample.planning.strategies import NAMES, Choice, Inputs, Strategy, make_strategy
+from mfsample.planning.workdirs import restore_runs
 
 __all__ = [
     "NAMES", "Choice", "Inputs", "OptimizeResult", "OptimizeSettings", "SphereSpec",
