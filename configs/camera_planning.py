@@ -88,9 +88,10 @@ def get_config():
   rounds.warm_start = False
   rounds.first_steps = 400  # Steps of the first round (warm start only).
   # Steps of every later round (re-initialised: of every round). Longer rounds make U
-  # follow the round model's error at the candidates: Spearman rho 0.44 at 150 steps,
-  # 0.60 at 400 (M = 8), 0.67 at 600 (`benchmarks/uncertainty_error.py`); 400 keeps the
-  # main job inside 20 minutes.
+  # follow the round model's error at the candidates: Spearman rho 0.36 at 150 steps,
+  # 0.41 at 400, 0.52 at 600 (M = 8, eight seeds) and 0.53 at 2000
+  # (`benchmarks/uncertainty_error.py`, docs/camera_planning.md); 400 keeps the main job
+  # inside 20 minutes.
   rounds.steps = 400
   # The round models only rank views: they train on 2x downscaled images (32 x 32), the
   # resolution at which candidates are scored (`strategy.score_downscale`).
