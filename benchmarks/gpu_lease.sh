@@ -13,13 +13,21 @@
 #   1. the whole training step at the paper's scale (400 x 400, 100 000 points) for each
 #      render.chunks_per_step in $CHUNKS (benchmarks/train_step.py);
 #   2. the SSIM filter and the tile sort against what they replaced (benchmarks/step_parts.py);
-#   3. the pre-registered paper-scale judge (configs/camera_planning_lego_final_paper_scale.py)
-#      with the fastest chunks_per_step of 1: farthest point and Ours (Sel.) side by side, one
-#      process each, seeds in order; rows are written as each model finishes.
+#   3. the pre-registered 200 x 200 judge (configs/camera_planning_lego_final_gpu_200.py),
+#   4. then the pre-registered paper-scale judge (configs/camera_planning_lego_final_paper_scale.py),
+#      each with the fastest chunks_per_step of 1: farthest point and Ours (Sel.) side by
+#      side, one process each, seeds in order; rows are written as each model finishes;
+#   5. once both judges have every seed: the time to score a candidate, ours against
+#      FisherRF (benchmarks/candidate_scoring.py; the README's H100 row predates its
+#      alternating timer).
+# The judges resume across leases: rows of earlier leases, committed under $JUDGE_DIR as
+# <judge>_<strategy>.json, are copied in first, so finished models are not trained again
+# (a judge with every seed done returns at once). `collect` brings back lease.log and
+# lease.tgz (every json, log and csv of $LEASE_DIR); unpack the judges' json into $JUDGE_DIR.
 # Sizes are environment variables, so a CPU dry run can shrink every part:
 #   LEASE_DIR=/tmp/lease OUT=/tmp/out SIZE=50 POINTS=500 STEPS=2 WARMUP=1 CHUNKS=16,64 \
-#   SSIM_SIZES=64 PAIRS=4096 FINAL_STEPS=20 SEEDS=0:1 DATA=../shared/data/lego \
-#   bash benchmarks/gpu_lease.sh start
+#   SSIM_SIZES=64 PAIRS=4096 MID_STEPS=20 FINAL_STEPS=20 SEEDS=0:1 DATA=../shared/data/lego \
+#   JUDGE_DIR=/tmp/none SCORE_SIZE=32 SCORE_GAUSSIANS=500 bash benchmarks/gpu_lease.sh start
 set -euo pipefail
 
 LEASE_DIR=${LEASE_DIR:-/tmp/lease}
@@ -31,7 +39,11 @@ WARMUP=${WARMUP:-2}
 CHUNKS=${CHUNKS:-16,64,256,1024}
 SSIM_SIZES=${SSIM_SIZES:-64,200,400,800,1600}
 PAIRS=${PAIRS:-65536,1048576}
+MID_STEPS=${MID_STEPS:-3000}
 FINAL_STEPS=${FINAL_STEPS:-7000}
+JUDGE_DIR=${JUDGE_DIR:-results/gpu_judges}
+SCORE_SIZE=${SCORE_SIZE:-200}
+SCORE_GAUSSIANS=${SCORE_GAUSSIANS:-20000}
 SEEDS=${SEEDS:-0:16}
 PILOT_FLAGS=${PILOT_FLAGS:-}
 
@@ -55,6 +67,28 @@ print(table[best]["chunks_per_step"])
 EOF
 }
 
+# One pre-registered judge: both strategies side by side, resuming earlier leases' rows.
+_judge() {
+  local name=$1 config=$2 steps=$3 chunks=$4 strategy pids=()
+  echo "== $(date -u +%T) judge $name ($config): $steps steps, chunks_per_step $chunks," \
+    "seeds $SEEDS"
+  for strategy in farthest ours_sel; do
+    local out="$LEASE_DIR/${name}_$strategy.json"
+    if [[ -e "$JUDGE_DIR/${name}_$strategy.json" && ! -e "$out" ]]; then
+      cp "$JUDGE_DIR/${name}_$strategy.json" "$out"
+    fi
+    # shellcheck disable=SC2086  # PILOT_FLAGS is a list of flags
+    python3 benchmarks/final_training.py --config="$config" \
+      --config.data.path="$DATA" --config.final_train.render.chunks_per_step="$chunks" \
+      --any_resolution --results=results/camera_planning_lego_rounds2000_seeds16/results.json \
+      --strategies="$strategy" --seeds="$SEEDS" --steps="$steps" --views=10 \
+      --references="$strategy" --out="$out" $PILOT_FLAGS \
+      >> "$LEASE_DIR/${name}_$strategy.log" 2>&1 &
+    pids+=($!)
+  done
+  wait "${pids[@]}" || echo "!! judge $name: a process failed (its log says why)"
+}
+
 _job() {
   local variants
   variants=$(echo "$CHUNKS" | sed 's/\([0-9]\+\)/deterministic@\1/g')
@@ -69,20 +103,13 @@ _job() {
   local chunks
   chunks=$(_fastest_chunks "$LEASE_DIR/train_step_chunks_per_step.json" 2>/dev/null) \
     || chunks=16  # the default, when the sweep gave nothing
-  echo "== $(date -u +%T) 3. paper-scale judge, chunks_per_step=$chunks, seeds $SEEDS"
-  local strategy pids=()
-  for strategy in farthest ours_sel; do
-    # shellcheck disable=SC2086  # PILOT_FLAGS is a list of flags
-    python3 benchmarks/final_training.py \
-      --config=configs/camera_planning_lego_final_paper_scale.py \
-      --config.data.path="$DATA" --config.final_train.render.chunks_per_step="$chunks" \
-      --any_resolution --results=results/camera_planning_lego_rounds2000_seeds16/results.json \
-      --strategies="$strategy" --seeds="$SEEDS" --steps="$FINAL_STEPS" --views=10 \
-      --references="$strategy" --out="$LEASE_DIR/paper_scale_$strategy.json" $PILOT_FLAGS \
-      > "$LEASE_DIR/paper_scale_$strategy.log" 2>&1 &
-    pids+=($!)
-  done
-  wait "${pids[@]}"
+  _judge gpu200 configs/camera_planning_lego_final_gpu_200.py "$MID_STEPS" "$chunks"
+  _judge paper_scale configs/camera_planning_lego_final_paper_scale.py "$FINAL_STEPS" "$chunks"
+  # Reached once both judges have every seed (a lease with time left after them).
+  echo "== $(date -u +%T) 5. candidate scoring, ours against FisherRF"
+  python3 benchmarks/candidate_scoring.py --resolution="$SCORE_SIZE" \
+    --num_gaussians="$SCORE_GAUSSIANS" --out="$LEASE_DIR/candidate_scoring_gpu.json" \
+    || echo "!! candidate_scoring failed"
   echo "== $(date -u +%T) done"
 }
 
@@ -94,16 +121,11 @@ _collect() {
   nvidia-smi --query-gpu=utilization.gpu,memory.used --format=csv,noheader 2>/dev/null || true
   tail -n 30 "$LEASE_DIR/lease.log"
   local f
-  for f in "$LEASE_DIR"/paper_scale_*.log; do
+  for f in "$LEASE_DIR"/{gpu200,paper_scale}_*.log; do
     [[ -e "$f" ]] && { echo "-- $f"; tr '\r' '\n' < "$f" | tail -n 3; }
   done
-  # At most 8 files come back from $OUT: the log, the GPU's load, two benchmark files, two
-  # strategies' rows and their logs.
-  for f in lease.log nvidia_smi.csv train_step_chunks_per_step.json step_parts_gpu.json \
-      paper_scale_farthest.json paper_scale_ours_sel.json \
-      paper_scale_farthest.log paper_scale_ours_sel.log; do
-    [[ -e "$LEASE_DIR/$f" ]] && cp "$LEASE_DIR/$f" "$OUT/"
-  done
+  cp "$LEASE_DIR/lease.log" "$OUT/"
+  (cd "$LEASE_DIR" && shopt -s nullglob && tar czf "$OUT/lease.tgz" -- *.json *.log *.csv)
   ls -l "$OUT"
 }
 
@@ -117,9 +139,9 @@ case "${1:-}" in
       setsid nohup nvidia-smi --query-gpu=timestamp,utilization.gpu,memory.used \
         --format=csv -l 5 > "$LEASE_DIR/nvidia_smi.csv" 2>&1 < /dev/null &
     fi
-    export -f _job _fastest_chunks
-    export LEASE_DIR DATA SIZE POINTS STEPS WARMUP CHUNKS SSIM_SIZES PAIRS FINAL_STEPS SEEDS \
-      PILOT_FLAGS
+    export -f _job _judge _fastest_chunks
+    export LEASE_DIR DATA SIZE POINTS STEPS WARMUP CHUNKS SSIM_SIZES PAIRS MID_STEPS \
+      FINAL_STEPS JUDGE_DIR SCORE_SIZE SCORE_GAUSSIANS SEEDS PILOT_FLAGS
     setsid nohup bash -c "_job" >> "$LEASE_DIR/lease.log" 2>&1 < /dev/null &
     echo "started; log: $LEASE_DIR/lease.log"
     ;;

@@ -39,6 +39,11 @@ Added after the lease: no model finished, so there is no outcome. The pilot's th
 farthest-point models (seeds 0-2, side by side) were stopped at 470 s unfinished; a step
 from the initial cloud takes 466 ms on the H100, so a model takes about an hour of it with
 this renderer (docs/camera_planning.md, "Lego at the paper's scale on a GPU").
+
+Added in session 34, with still no model finished: the stopping rule extends over leases.
+`benchmarks/gpu_lease.sh` resumes the rows of earlier leases and runs this judge after the
+200 x 200 one (`camera_planning_lego_final_gpu_200.py`); seeds stay in order and every seed
+with both models finished is reported, whatever it shows.
 """
 
 from configs import camera_planning_lego_rounds2000_seeds16
