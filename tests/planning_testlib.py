@@ -6,6 +6,10 @@ settings static), and the expensive objects are cached here for the whole sessio
 """
 
 import functools
+import os
+import subprocess
+import sys
+from pathlib import Path
 
 import jax
 import jax.numpy as jnp
@@ -17,6 +21,21 @@ from mfsample.planning import poses, runner
 from mfsample.planning.pool import make_pool
 
 BOUNDS = tuple((g, b) for g, b in zip(GROUPS, (1.0, 20.0, 2.0, 20.0, 0.5, 0.5), strict=True))
+
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def run_benchmark(name, *args, check=True):
+  """`benchmarks/<name>.py` on the tiny config in a subprocess (absl flags parse once per
+  process); with `check`, a failure fails the test with the script's stderr."""
+  env = {**os.environ, "PYTHONPATH": str(REPO)}
+  proc = subprocess.run(
+      [sys.executable, f"benchmarks/{name}.py", "--config=configs/camera_planning_tiny.py",
+       *args], cwd=REPO, env=env, capture_output=True, text=True, timeout=600)
+  if check:
+    assert proc.returncode == 0, proc.stderr[-3000:]
+  return proc
 
 
 def tiny_config():

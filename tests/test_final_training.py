@@ -7,25 +7,13 @@ and --reuse_rows_from takes another file's rows instead of training them again.
 """
 
 import json
-import os
-import subprocess
-import sys
-from pathlib import Path
 
 import planning_testlib
 import pytest
 
-REPO = Path(__file__).resolve().parents[1]
-
 
 def _final_training(*args, check=True):
-  env = {**os.environ, "PYTHONPATH": str(REPO)}
-  proc = subprocess.run(
-      [sys.executable, "benchmarks/final_training.py", "--config=configs/camera_planning_tiny.py",
-       *args], cwd=REPO, env=env, capture_output=True, text=True, timeout=600)
-  if check:
-    assert proc.returncode == 0, proc.stderr[-3000:]
-  return proc
+  return planning_testlib.run_benchmark("final_training", *args, check=check)
 
 
 @pytest.fixture(scope="module")

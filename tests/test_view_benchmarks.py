@@ -11,26 +11,15 @@ round models, so with the config's setting it reaches the poses the run reached.
 """
 
 import json
-import os
-import subprocess
-import sys
-from pathlib import Path
 
 import numpy as np
 import planning_testlib
 import pytest
 from planning_testlib import tiny_config
 
-REPO = Path(__file__).resolve().parents[1]
-
 
 def _script(name, *args):
-  env = {**os.environ, "PYTHONPATH": str(REPO)}
-  proc = subprocess.run(
-      [sys.executable, f"benchmarks/{name}.py", "--config=configs/camera_planning_tiny.py",
-       *args], cwd=REPO, env=env, capture_output=True, text=True, timeout=600)
-  assert proc.returncode == 0, proc.stderr[-3000:]
-  return proc.stdout
+  return planning_testlib.run_benchmark(name, *args).stdout
 
 
 def _view_value(*args):
