@@ -44,7 +44,9 @@ FINAL_2000 = "2000-step final"
 MEAN_OF_5 = "600-step finals, mean of {inits} inits"
 DENSIFIED = "2000-step densified final"
 DENSIFIED_MEAN = "2000-step densified finals, mean of {inits} inits"
-FINAL_STEPS = {MEAN_OF_5: 600, FINAL_2000: 2000, DENSIFIED: 2000, DENSIFIED_MEAN: 2000}
+DENSIFIED_200 = "3000-step densified final at 200 x 200"
+FINAL_STEPS = {MEAN_OF_5: 600, FINAL_2000: 2000, DENSIFIED: 2000, DENSIFIED_MEAN: 2000,
+               DENSIFIED_200: 3000}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -98,6 +100,7 @@ def _entries():
       (SEL_FAR, "default", rounds2000, DENSIFIED_MEAN, "final_2000_densified_default", "all"),
       (SEL_FAR, "lego", rounds2000, DENSIFIED, "final_2000_densified_lego", "all"),
       (SEL_FAR, "lego", rounds2000, DENSIFIED_MEAN, "final_2000_densified_lego", "all"),
+      (SEL_FAR, "lego", rounds2000, DENSIFIED_200, "final_3000_gpu200_lego", "all"),
       (SEL_FISHER, "default", rounds400, MEAN_OF_5, "final_inits_default", ""),
       (SEL_FISHER, "default", rounds2000, FINAL_2000, "final_2000_rounds2000", ""),
       (SEL_FISHER, "lego", rounds400, MEAN_OF_5, "final_inits_lego", ""),
@@ -113,7 +116,7 @@ def _entries():
     out.append(Entry(comparison, scene, protocol, judge, f"{r}{name}.json", fixed))
   # Rows of one scene and protocol together, each judge in the order above.
   protocols = [rounds400, rounds2000, authors, fullres]
-  judges = [RUN, MEAN_OF_5, FINAL_2000, DENSIFIED, DENSIFIED_MEAN]
+  judges = [RUN, MEAN_OF_5, FINAL_2000, DENSIFIED, DENSIFIED_MEAN, DENSIFIED_200]
   return sorted(out, key=lambda e: (list(COMPARISONS).index(e.comparison), e.scene,
                                     protocols.index(e.protocol), judges.index(e.judge)))
 
