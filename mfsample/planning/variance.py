@@ -18,7 +18,8 @@ the reduction from prior to posterior variance). Here, for 3DGS:
         + prior_weight * mean_i (s_i - s_0)^2,
 
   one training view per step; Gaussians no training view sees keep the prior s_0;
-* a candidate's score is the rendered variance summed over its pixels, sum_p beta^2(p).
+* a candidate's score is the rendered variance above the floor summed over its pixels,
+  sum_p (beta^2(p) - beta_min) (the floor shifts every candidate alike).
 """
 
 import functools
