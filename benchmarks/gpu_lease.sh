@@ -13,13 +13,14 @@
 #   1. the whole training step at the paper's scale (400 x 400, 100 000 points) for each
 #      render.chunks_per_step in $CHUNKS (benchmarks/train_step.py);
 #   2. the SSIM filter and the tile sort against what they replaced (benchmarks/step_parts.py);
-#   3. the pre-registered 200 x 200 judge (configs/camera_planning_lego_final_gpu_200.py),
-#   4. then the pre-registered paper-scale judge (configs/camera_planning_lego_final_paper_scale.py),
-#      each with the fastest chunks_per_step of 1: farthest point and Ours (Sel.) side by
-#      side, one process each, seeds in order; rows are written as each model finishes;
-#   5. once both judges have every seed: the time to score a candidate, ours against
-#      FisherRF (benchmarks/candidate_scoring.py; the README's H100 row predates its
-#      alternating timer).
+#   3. the pre-registered 200 x 200 judge (configs/camera_planning_lego_final_gpu_200.py;
+#      every seed is done, on the CPU, so it returns at once);
+#   4. the time to score a candidate, ours against FisherRF (benchmarks/candidate_scoring.py;
+#      the README's H100 row predates its alternating timer): a few minutes, so it runs
+#      before the judge below, which no lease can finish (about an hour a model);
+#   5. the pre-registered paper-scale judge (configs/camera_planning_lego_final_paper_scale.py).
+#   Each judge runs with the fastest chunks_per_step of 1: farthest point and Ours (Sel.)
+#   side by side, one process each, seeds in order; rows are written as each model finishes.
 # The judges resume across leases: rows of earlier leases, committed under $JUDGE_DIR as
 # <judge>_<strategy>.json, are copied in first, so finished models are not trained again
 # (a judge with every seed done returns at once). `collect` brings back lease.log and
@@ -104,12 +105,11 @@ _job() {
   chunks=$(_fastest_chunks "$LEASE_DIR/train_step_chunks_per_step.json" 2>/dev/null) \
     || chunks=16  # the default, when the sweep gave nothing
   _judge gpu200 configs/camera_planning_lego_final_gpu_200.py "$MID_STEPS" "$chunks"
-  _judge paper_scale configs/camera_planning_lego_final_paper_scale.py "$FINAL_STEPS" "$chunks"
-  # Reached once both judges have every seed (a lease with time left after them).
-  echo "== $(date -u +%T) 5. candidate scoring, ours against FisherRF"
+  echo "== $(date -u +%T) 4. candidate scoring, ours against FisherRF"
   python3 benchmarks/candidate_scoring.py --resolution="$SCORE_SIZE" \
     --num_gaussians="$SCORE_GAUSSIANS" --out="$LEASE_DIR/candidate_scoring_gpu.json" \
     || echo "!! candidate_scoring failed"
+  _judge paper_scale configs/camera_planning_lego_final_paper_scale.py "$FINAL_STEPS" "$chunks"
   echo "== $(date -u +%T) done"
 }
 
