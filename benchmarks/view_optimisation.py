@@ -25,6 +25,7 @@ Settings: M:lr, then optional flags: nocut (the renderer's cut-offs off), resamp
 every step), nodrop (no z drop), sN (N steps, the z drop at N / 2).
 """
 
+import functools
 import json
 
 from absl import app, flags
@@ -111,6 +112,13 @@ def main(argv):
   budget = {"score": RenderSettings(max_intersections=1 << 12),
             "opt": RenderSettings(max_intersections=1 << 12)}
 
+  # Compiled once for the whole replay (per budget): a closure jitted afresh in every round
+  # would be traced and compiled again each time, the probe's value and its gradient alike.
+  @functools.partial(jax.jit, static_argnames=("settings",))
+  def uncertainty_at(uv, model, z, settings):
+    return unc.uncertainty(model, poses.spherical_camera(uv, sphere), z, settings=settings,
+                           background=bg)
+
   rows = []
   bar = tqdm(total=sum(len(r["indices"]) - 1 for r in runs), desc="rounds")
   for run in runs:
@@ -147,13 +155,11 @@ def main(argv):
       for name, settings in (("renderer", budget["score"]), ("no_cutoffs", _no_cutoffs(
           budget["score"]))):
 
-        def u_of(uv, model=model, z=z_select, settings=settings):
-          return unc.uncertainty(model, poses.spherical_camera(uv, sphere), z,
-                                 settings=settings, background=bg)
-
-        if bool(jnp.any(u_of(uv0).stats.overflow)):
+        if bool(jnp.any(uncertainty_at(uv0, model, z_select, settings).stats.overflow)):
           raise RuntimeError(f"the {name} probe overflowed its budget at the start")
-        smooth[name] = _smoothness(jax.jit(lambda uv, f=u_of: f(uv).value), uv0)
+        smooth[name] = _smoothness(
+            lambda uv, model=model, z=z_select, settings=settings: uncertainty_at(
+                uv, model, z, settings).value, uv0)
       rows.append({
           "seed": seed, "views": k, "u_start": u[0], "smoothness": smooth,
           "variants": {name: {"u_end": float(u[i + 1]), "ratio": float(u[i + 1] / u[0]),
