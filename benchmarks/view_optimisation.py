@@ -46,17 +46,22 @@ _OUT = flags.DEFINE_string("out", "results/view_optimisation.json", "JSON output
 
 
 def _smoothness(u_of, uv0):
-  """Autodiff vs central finite differences of U along its gradient direction at uv0."""
+  """Autodiff vs central finite differences of U along its gradient direction at uv0.
+
+  `u_of(uv)` returns (U, its render's overflow flags); returns (the comparison, whether the
+  render at uv0 overflowed its budget).
+  """
   import jax
   import jax.numpy as jnp
 
-  value, grad = jax.value_and_grad(u_of)(uv0)
+  (value, overflow), grad = jax.value_and_grad(u_of, has_aux=True)(uv0)
   norm = float(jnp.linalg.norm(grad))
   direction = grad / jnp.maximum(norm, 1e-30)
   out = {"u": float(value), "autodiff": norm}
   for h in (1e-4, 1e-3):
-    out[f"fd_{h:g}"] = float((u_of(uv0 + h * direction) - u_of(uv0 - h * direction)) / (2 * h))
-  return out
+    ahead, behind = u_of(uv0 + h * direction)[0], u_of(uv0 - h * direction)[0]
+    out[f"fd_{h:g}"] = float((ahead - behind) / (2 * h))
+  return out, bool(jnp.any(overflow))
 
 
 def _no_cutoffs(settings):
@@ -155,11 +160,13 @@ def main(argv):
       for name, settings in (("renderer", budget["score"]), ("no_cutoffs", _no_cutoffs(
           budget["score"]))):
 
-        if bool(jnp.any(uncertainty_at(uv0, model, z_select, settings).stats.overflow)):
+        def u_of(uv, model=model, z=z_select, settings=settings):
+          out = uncertainty_at(uv, model, z, settings)
+          return out.value, out.stats.overflow
+
+        smooth[name], overflowed = _smoothness(u_of, uv0)
+        if overflowed:
           raise RuntimeError(f"the {name} probe overflowed its budget at the start")
-        smooth[name] = _smoothness(
-            lambda uv, model=model, z=z_select, settings=settings: uncertainty_at(
-                uv, model, z, settings).value, uv0)
       rows.append({
           "seed": seed, "views": k, "u_start": u[0], "smoothness": smooth,
           "variants": {name: {"u_end": float(u[i + 1]), "ratio": float(u[i + 1] / u[0]),
