@@ -51,7 +51,7 @@ def run():
   from mfsample import uncertainty as unc
   from mfsample.model import GROUPS, SamplerSpec, init_model
   from mfsample.planning import fisher, poses
-  from mfsample.render import RenderSettings
+  from mfsample.renderer import RenderSettings
 
   rng = np.random.default_rng(0)
   n, res, b = _N.value, _RES.value, _CANDS.value

@@ -57,8 +57,8 @@ def run_cell(cell, repeats, chunks_per_step=16):
   import jax.numpy as jnp
 
   from mfsample import RenderSettings, render
-  from mfsample.render.budget import render_with_budget
-  from mfsample.render.reference import render_reference
+  from mfsample.renderer.budget import render_with_budget
+  from mfsample.renderer.reference import render_reference
   from mfsample.testing import orbit_camera, random_gaussians
 
   n, res = map(int, cell.split("x"))

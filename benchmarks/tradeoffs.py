@@ -93,7 +93,7 @@ def _scores(model, cameras, z, settings, background):
   import numpy as np
 
   from mfsample import uncertainty as unc
-  from mfsample.render.budget import render_with_budget
+  from mfsample.renderer.budget import render_with_budget
 
   values = []
   for i in range(len(cameras)):
@@ -171,8 +171,8 @@ def _psnr_and_time(gaussians, views, settings, background):
   import numpy as np
 
   from mfsample import metrics
-  from mfsample.render import render
-  from mfsample.render.budget import render_with_budget
+  from mfsample.renderer import render
+  from mfsample.renderer.budget import render_with_budget
 
   psnrs = []
   for i in range(len(views)):

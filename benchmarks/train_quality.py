@@ -38,7 +38,7 @@ _EXTRA = flags.DEFINE_list("extra", [], "More --config.* overrides for every var
 
 
 def _command(name):
-  return [sys.executable, "experiments/train.py", "--config=configs/train_lego.py",
+  return [sys.executable, "experiments/train.py", "--config=configs/train.py:lego",
           f"--workdir={os.path.join(_WORKDIR.value, name)}",
           f"--config.data.path={_DATA.value}",
           f"--config.data.downscale={400 // _SIZE.value}",

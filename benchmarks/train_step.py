@@ -53,9 +53,9 @@ _CHILD = flags.DEFINE_string("child", None, "Internal: run one variant and print
 
 
 def _config(cell):
-  from configs import train_lego
+  from configs import train
 
-  config = train_lego.get_config()
+  config = train.get_config("lego")
   variant, _, chunks_per_step = cell.partition("@")
   if chunks_per_step:
     config.render.chunks_per_step = int(chunks_per_step)
@@ -115,7 +115,7 @@ def _child(variant):
   import jax.numpy as jnp
   import numpy as np
 
-  from mfsample.render.budget import fit_budget
+  from mfsample.renderer.budget import fit_budget
   from mfsample.train import data as data_lib
   from mfsample.train import loop
   from mfsample.train.step import make_train_step

@@ -73,8 +73,8 @@ def run():
   from mfsample import uncertainty as unc
   from mfsample.planning import poses, runner
   from mfsample.planning.pool import make_pool
-  from mfsample.render import RenderSettings
-  from mfsample.render.budget import render_with_budget
+  from mfsample.renderer import RenderSettings
+  from mfsample.renderer.budget import render_with_budget
 
   config = _CONFIG.value
   config.data.progress = False

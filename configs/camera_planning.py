@@ -1,165 +1,137 @@
-"""Active camera planning on the built-in default scene: the README's main job.
+"""Active camera planning: `experiments/camera_planning.py --config=configs/camera_planning.py`.
 
-All strategies (paper Table 1) on `mfsample.scenes.get_scene("default")`, one seed, scaled
-so that the whole run, first-time captures included, fits in 20 minutes on two CPU cores.
-The paper's protocol (METHOD.md Sec. 3) at 800 x 800 on a GPU: 2000 steps per round,
-7000 final steps, 100k initial points. Here: 64 x 64 images, 2000 initial points, no
-densification, 400 steps per (re-initialised) round at 32 x 32, where candidates are also
-scored (U with M = 8 samples), and 600 final steps.
-Every number is a field below; `configs/camera_planning_results.py` runs more seeds.
+Without a variant this is the main job: every strategy of the paper's Table 1 on the
+built-in Mitsuba scene, one seed, about 20 minutes on two CPU cores (the defaults and a
+comment on every field: `mfsample.planning.config`). Variants combine, comma-separated,
+e.g. `--config=configs/camera_planning.py:lego,rounds2000`:
 
-  python experiments/camera_planning.py --config=configs/camera_planning.py \
-      --workdir=workdirs/camera_planning
+  lego             NeRF Synthetic lego at 80 x 80: candidates = its 100 training views,
+                   test = every 4th test view; selection strategies only (no oracle).
+                   Point `--config.data.path` at the scene folder.
+  rounds2000       the paper's round length: 2000 steps per round instead of 400.
+  authors_rounds   round models as the authors train them: densification, lambda = 1 / views.
+  fullres          round models trained, and candidates scored, at the test resolution.
+  densified_final  final models trained 2000 steps with 3DGS densification.
+  paper_scale      lego's final models at the paper's scale (400 x 400, 100k points, 7000
+                   densified steps; a GPU job), on round models at 40 x 40.
+  tiny             seconds-long: random ground-truth Gaussians at 24 x 24, 3 views.
+
+Seeds and strategies are overrides, e.g. `--config.seeds="(0,1,2,3,4,5,6,7)"
+--config.strategies="('farthest','ours_sel')"`; docs/camera_planning.md lists each study.
 """
 
-import ml_collections
+from mfsample.planning.config import default_config
 
-from configs import train_default
-from mfsample.planning.strategies import TABLE1_NAMES
-
-
-def _training(steps, kind):
-  """A training config for `steps` steps without densification (`configs/train_default`).
-
-  `steps` may be a `FieldReference` (the rounds pass `rounds.steps`'s): num_steps then
-  follows it, and log_every follows it until a config sets its own.
-  """
-  t = train_default.get_config()
-  t.sampler.kind = kind  # Rounds of Ours: "lowrank"; the baselines' rounds set their own.
-  t.sampler.rank = 2  # k = 2, the paper's default.
-  t.model.sh_degree = 0  # View-independent colour: < 1000 steps never raise the SH degree.
-  t.model.init_points = 2_000  # Random initial points in the scene box (no SfM).
-  t.model.max_gaussians = 8_000
-  t.train.num_steps = steps
-  t.train.progress = False
-  t.train.log_every = steps * 1  # A derived reference: setting it leaves num_steps alone.
-  t.densify.start = 100_000  # No densification (static shapes: one compilation per kind).
-  t.densify.stop = 100_000
-  t.densify.opacity_reset_every = 100_000
-  t.data.background = (1.0, 1.0, 1.0)
-  # 3DGS derives the extent from the training cameras; fixed here so that it does not
-  # change (and recompile the step) every round: 1.1 x the camera distance of the scene.
-  t.data.extent = 3.3
-  # lambda of the volume term. The authors use 1 / (number of views), with 2000+ steps per
-  # round and densification (whose fresh B_hat entries keep observed regions certain). In
-  # a few hundred steps without densification that weight swamps the data term in Adam's
-  # normalisation: every B_hat entry then grows at the same rate, seen or not (measured),
-  # and U only measures how much of the scene a view sees. At 1e-4 the data gradients of
-  # observed Gaussians dominate their Adam denominators and slow their growth: U is low
-  # near the training views and high away from them (tests/test_uncertainty.py).
-  t.loss.volume_weight = 1e-4
-  t.loss.volume_stop_before_end = 10  # Authors: the last 100 of 2000 steps; scaled.
-  t.render.max_intersections = 1 << 14  # Initial budget (grown on overflow).
-  t.eval.lpips_net = ""
-  return t
+SELECTION_STRATEGIES = ("random", "farthest", "activenerf", "fisher", "acp", "ours_sel")
 
 
-def get_config():
-  config = ml_collections.ConfigDict()
-  config.seeds = (0,)  # Seeds: initial view, model initialisation, random choices.
-  config.strategies = TABLE1_NAMES  # random, farthest, activenerf, fisher, acp, ours x3.
-  config.initial_view = -1  # Candidate index of the first view; < 0: a seeded random one.
-  config.eval_views = (5, 10)  # Evaluate after this many views (paper: 5 and 10).
-  config.max_views = 10  # Views at the end of a run (the largest of eval_views).
-  config.progress = True  # tqdm progress bar.
-  # table.md also lists every strategy's per-seed PSNR difference to each of these (paired
-  # by seed): the references of the issue's aim at 10 views.
-  config.paired_references = ("farthest", "fisher", "ours_sel")
-
-  # ----------------------------------------------------------------- data
-  config.data = data = ml_collections.ConfigDict()
-  data.kind = "scene"  # "scene" (Mitsuba oracle), "blender" (fixed pool) or "synthetic".
-  data.scene = "default"  # mfsample.scenes.get_scene name.
-  data.width = 64  # Image width in pixels (paper: 800).
-  data.height = 64  # Image height in pixels.
-  data.num_candidates = 100  # Candidate pool (paper: the 100 training views).
-  data.num_test = 40  # Held-out test views.
-  data.pool_seed = 0  # Seed of the candidate poses (test poses use pool_seed + 1).
-  data.spp = 36  # Mitsuba samples per pixel of a capture (mfsample.scenes.DEFAULT_SPP).
-  data.cache_dir = ""  # Capture cache ("": $MFSAMPLE_CACHE or ~/.cache/mfsample/captures).
-  data.background = (1.0, 1.0, 1.0)  # White, as the captures are composited.
-  data.progress = True  # Progress bars of the captures.
-
-  # ----------------------------------------------------------------- training
-  config.rounds = rounds = ml_collections.ConfigDict()
-  # The paper's text: one training run, a camera added every 2000 iterations (warm start).
-  # The authors' code: every round re-initialises the model and trains 2000 iterations.
-  # Warm start gives better-trained round models for the same CPU time; False: the code's.
-  rounds.warm_start = False
-  rounds.first_steps = 400  # Steps of the first round (warm start only).
-  # Steps of every later round (re-initialised: of every round). Longer rounds make U
-  # follow the round model's error at the candidates: Spearman rho 0.36 at 150 steps,
-  # 0.41 at 400, 0.52 at 600 (M = 8, eight seeds) and 0.53 at 2000
-  # (`benchmarks/uncertainty_error.py`, docs/camera_planning.md); 400 keeps the main job
-  # inside 20 minutes.
-  rounds.steps = 400
-  # The round models only rank views: they train on 2x downscaled images (32 x 32), the
-  # resolution at which candidates are scored (`strategy.score_downscale`).
-  rounds.downscale = 2
-  # The training config of the rounds; its num_steps is `rounds.steps` (one field: setting
-  # either sets both; with warm_start the runner spans it over all rounds). Ours: lowrank.
-  config.round_train = _training(rounds.get_ref("steps"), "lowrank")
-  # Final plain 3DGS (authors: 7000). Test PSNR still rises past 600 steps; the budget is
-  # the main job's 20 minutes.
-  config.final_train = _training(600, "deterministic")
-
-  # ----------------------------------------------------------------- strategies
-  config.strategy = s = ml_collections.ConfigDict()
-  # Candidates are scored (U, FisherRF, ActiveNeRF) at 1 / score_downscale of the image
-  # size, the same for every strategy: a ranking needs fewer pixels than a reconstruction.
-  s.score_downscale = 2
-  s.ours = ours = ml_collections.ConfigDict()
-  # M for Ours (Sel.) scoring (paper: 2). At 32 x 32 eight samples cost little and rank the
-  # candidates as a 32-sample U does better than two (README, speed-accuracy trade-offs).
-  ours.select_samples = 8
-  ours.z_seed = 6174  # Sobol scrambling seed of the U samples (authors' code: 6174).
-  ours.chunk_size = 1  # Candidates vmapped together (1: sequential, cheapest on a CPU).
-  ours.score_downscale = s.get_ref("score_downscale")
-  s.optimize = opt = ml_collections.ConfigDict()
-  opt.samples = 2  # M during optimisation (paper: 2).
-  # Authors: 400 Adam steps at lr 5e-4, z x 0.1 from step 200 (u, v travel <= 0.2). Scaled
-  # to 60 steps at lr 3.3e-3: the same maximum travel in 15% of the time.
-  opt.steps = 60
-  opt.lr = 3.3e-3
-  opt.z_drop_step = 30
-  opt.z_drop_scale = 0.1
-  opt.downscale = 2  # The optimisation renders at 1/2 of the image size (speed).
-  # False: the same M Sobol z at every step (METHOD.md). True: M fresh uniform z per step,
-  # stochastic gradients of the expected U (`optimize.OptimizeSettings.resample_z`).
-  opt.resample_z = False
-  # The round model of the optimising variants: "" = the rounds' sampler (lowrank, the
-  # paper's). The authors' published optimisation command trains rank 0, i.e. "diagonal",
-  # with fresh z every step. Neither lifts Opt. Sel. here
-  # (docs/camera_planning.md, gradient ascent on the camera).
-  opt.sampler = ""
-  # Ours (Opt. Best) scores every best_every-th pose of the ascent (and its end) as the
-  # candidates are scored, and keeps the best of them and the start: 6 extra scorings here.
-  opt.best_every = 10
-  s.fisher = fisher = ml_collections.ConfigDict()
-  fisher.probes = 1  # Rademacher probes (backward passes) per candidate.
-  fisher.train_probes = 8  # Probes per training view (H_train is in a denominator).
-  fisher.reg = 1e-6  # lambda of sum H_cand / (H_train + lambda) (FisherRF).
-  fisher.groups = ("means", "log_scales", "opacity_logits", "sh_dc", "sh_rest")  # No rotations.
-  fisher.score_downscale = s.get_ref("score_downscale")
-  s.activenerf = an = ml_collections.ConfigDict()
-  an.steps = 40  # Adam steps of the per-Gaussian log-variance fit (one view each).
-  an.lr = 0.05  # Its learning rate.
-  an.prior_var = 0.05  # Variance of Gaussians no view constrains.
-  an.beta_min = 1e-3  # Variance floor of every pixel.
-  an.prior_weight = 1e-3  # Weight of the quadratic prior on the log-variance.
-  an.score_downscale = s.get_ref("score_downscale")
-  s.acp = acp = ml_collections.ConfigDict()
-  acp.resolution = 32  # Grid cells per axis (Kopanas & Drettakis: 32^3).
-  acp.bins = 64  # Direction bins (Fibonacci sphere).
-  acp.weight = 1.0  # Weight of angular uniformity against coverage.
-  acp.near = 0.2  # Cells nearer than this (camera z) are not observed.
-
-  # ----------------------------------------------------------------- evaluation, figures
-  config.eval = ev = ml_collections.ConfigDict()
-  ev.lpips_net = "vgg16"  # LPIPS network ("vgg16" as in 3DGS and the paper; "" to skip).
-  config.figures = fig = ml_collections.ConfigDict()
-  fig.enabled = True  # Write cameras.png and landscape.png.
-  fig.landscape_u = 36  # Azimuth samples of the landscape grid.
-  fig.landscape_v = 10  # Polar samples of the landscape grid.
-  fig.landscape_trajectory = True  # Trace an optimisation from a random start on it.
+def get_config(variant=""):
+  config = default_config()
+  for name in filter(None, (v.strip() for v in variant.split(","))):
+    if name not in VARIANTS:
+      raise ValueError(f"unknown variant {name!r} of configs/camera_planning.py; known: "
+                       f"{', '.join(VARIANTS)}")
+    VARIANTS[name](config)
   return config
+
+
+def lego(config):
+  """NeRF Synthetic lego on a fixed pool, at 80 x 80 (rounds and scoring at 40 x 40)."""
+  config.strategies = SELECTION_STRATEGIES
+  config.data.kind = "blender"
+  for t in (config.round_train, config.final_train):
+    t.data.extent = 4.4  # 1.1 x the camera distance (4.03).
+    t.model.init_points = 3_000  # More pixels than the default scene's 64 x 64.
+    t.render.max_intersections = 1 << 15
+
+
+def rounds2000(config):
+  """The paper's round length: every re-initialised round model trains 2000 steps."""
+  config.rounds.steps = 2000
+  config.round_train.loss.volume_stop_before_end = 100  # The authors' value at 2000 steps.
+
+
+def authors_rounds(config):
+  """Round models with the authors' recipe: 3DGS densification from step 500 to the end of
+  the round and the volume weight lambda = 1 / (number of training views)."""
+  d = config.round_train.densify
+  d.start = 500
+  d.every = 100
+  d.stop = config.rounds.get_ref("steps")
+  d.opacity_reset_every = 3_000  # The authors' period: no reset within a 2000-step round.
+  config.round_train.model.max_gaussians = 20_000
+  config.round_train.loss.volume_weight = None  # 1 / the number of training views.
+
+
+def fullres(config):
+  """Round models train on, and candidates are scored at, the test resolution."""
+  config.rounds.downscale = 1
+  config.strategy.score_downscale = 1
+
+
+def densified_final(config, steps=2000, max_gaussians=20_000):
+  """Final models trained `steps` steps with 3DGS densification (every 100 steps from step
+  500 to the end, no opacity reset before step 3000)."""
+  t = config.final_train
+  t.train.num_steps = steps
+  t.train.log_every = steps
+  t.densify.start = 500
+  t.densify.every = 100
+  t.densify.stop = steps
+  t.densify.opacity_reset_every = 3_000
+  t.model.max_gaussians = max_gaussians
+
+
+def paper_scale(config):
+  """Lego's final models as the authors train them, on the round models of lego,rounds2000
+  (40 x 40): the files' 400 x 400 images, 100k random initial points, SH degree 3, 7000
+  steps with densification and opacity resets."""
+  lego(config)
+  rounds2000(config)
+  config.strategies = ("farthest", "ours_sel")
+  config.data.downscale = 1
+  config.rounds.downscale = 10
+  config.strategy.score_downscale = 10
+  densified_final(config, steps=7_000, max_gaussians=300_000)
+  t = config.final_train
+  t.densify.sh_degree_every = 1_000
+  t.model.sh_degree = 3
+  t.model.init_points = 100_000
+  t.render.max_intersections = 1 << 20
+  t.render.max_budget = 1 << 26
+
+
+def tiny(config):
+  """24 x 24 images of random ground-truth Gaussians, 8 candidates, 3 views, a few steps."""
+  config.eval_views = (2, 3)
+  config.max_views = 3
+  config.progress = False
+  config.data.kind = "synthetic"
+  config.data.width = 24
+  config.data.height = 24
+  config.data.num_candidates = 8
+  config.data.num_test = 2
+  config.data.background = (0.0, 0.0, 0.0)
+  for t in (config.round_train, config.final_train):
+    t.model.init_points = 150
+    t.model.max_gaussians = 512
+    t.data.extent = 3.3
+    t.render.max_intersections = 1 << 11
+  config.rounds.first_steps = 100
+  config.rounds.steps = 100
+  config.rounds.downscale = 1
+  config.final_train.train.num_steps = 12
+  config.round_train.loss.volume_every = 3
+  config.strategy.optimize.steps = 12
+  config.strategy.optimize.lr = 1e-2
+  config.strategy.optimize.z_drop_step = 8
+  config.strategy.activenerf.steps = 4
+  config.strategy.fisher.train_probes = 2
+  config.strategy.acp.resolution = 8
+  config.eval.lpips_net = ""
+  config.figures.landscape_u = 6
+  config.figures.landscape_v = 3
+
+
+VARIANTS = {f.__name__: f for f in (lego, rounds2000, authors_rounds, fullres, densified_final,
+                                    paper_scale, tiny)}

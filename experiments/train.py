@@ -1,19 +1,13 @@
 """Trains a stochastic Gaussian field and evaluates it on the test views.
 
-  python experiments/train.py --config=configs/train_lego.py \
-      --workdir=workdirs/lego --config.sampler.rank=4
+  python experiments/train.py --config=configs/train.py:lego --workdir=workdirs/lego \
+      --config.data.path=/data/nerf_synthetic/lego --config.sampler.rank=4
 
-Re-running with the same workdir resumes from the newest checkpoint.
+Running again on the same workdir resumes from the newest checkpoint.
 """
-
-import sys
-from pathlib import Path
 
 from absl import app, flags
 from ml_collections import config_flags
-
-# The config files import each other as `configs.*`; configs/ is not an installed package.
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from mfsample.train import train_and_evaluate
 

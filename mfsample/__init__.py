@@ -6,7 +6,7 @@ The public API on one screen:
   render, RenderSettings            the tile-based 3DGS renderer and its static settings
   RenderOutput, TileStats           what render returns
   fit_budget, render_with_budget    grow the intersection budget instead of truncating
-  Model, SamplerSpec                a stochastic 3DGS model: raw mean, B_hat, mask (Sec. 4.2)
+  Model, SamplerSpec, init_model    a stochastic 3DGS model: raw mean, B_hat, mask (Sec. 4.2)
   sample, mean_gaussians            theta(z) = mean + B_hat z as Gaussians; the mean model
   sobol_z, draw_z                   z for the samplers: scrambled Sobol / uniform in [-1, 1]
   train_and_evaluate                the training experiment (`mfsample.train.train` for Views)
@@ -14,16 +14,19 @@ The public API on one screen:
                                     and its per-pixel map; uncertainty_z; score_cameras
   run_camera_planning               the active camera planning protocol (the main job)
   testing                           synthetic scenes for tests, benchmarks and notebooks
+
+Subpackages: `renderer` (the renderer's stages and budgets), `train`, `planning`, `data`,
+`scenes` (the Mitsuba capture oracle), `metrics`, `model`, `samplers`.
 """
 
 # `uncertainty` is the module: exporting its function of the same name would shadow it.
 from mfsample import testing, uncertainty
 from mfsample.camera import Camera
 from mfsample.gaussians import Gaussians
-from mfsample.model import Model, SamplerSpec, mean_gaussians
+from mfsample.model import Model, SamplerSpec, init_model, mean_gaussians
 from mfsample.planning import run_camera_planning
-from mfsample.render import RenderOutput, RenderSettings, TileStats, render
-from mfsample.render.budget import fit_budget, render_with_budget
+from mfsample.renderer import RenderOutput, RenderSettings, TileStats, render
+from mfsample.renderer.budget import fit_budget, render_with_budget
 from mfsample.samplers import draw_z, sample, sobol_z
 
 # `mfsample.train` stays the subpackage (its `train` function is `mfsample.train.train`).
@@ -39,6 +42,7 @@ __all__ = [
     "TileStats",
     "draw_z",
     "fit_budget",
+    "init_model",
     "mean_gaussians",
     "render",
     "render_with_budget",

@@ -28,9 +28,9 @@ from jax.sharding import AxisType, Mesh, PartitionSpec
 
 from mfsample import samplers
 from mfsample.camera import Camera
-from mfsample.render import TileStats, render
-from mfsample.render.budget import render_with_budget
-from mfsample.render.settings import RenderSettings
+from mfsample.renderer import TileStats, render
+from mfsample.renderer.budget import render_with_budget
+from mfsample.renderer.settings import RenderSettings
 
 
 class Uncertainty(NamedTuple):
@@ -105,7 +105,7 @@ def uncertainty(model, camera: Camera, z, *, settings: RenderSettings = RenderSe
     camera: one unbatched `Camera`.
     z: [M, *samplers.z_shape(model)] samples, e.g. `uncertainty_z(model, 2)`.
     settings: `RenderSettings` (static). Check `stats.overflow`: an overflowing render is
-      incomplete; grow the budget (`mfsample.render.budget.fit_budget`) and call again.
+      incomplete; grow the budget (`mfsample.renderer.budget.fit_budget`) and call again.
     background: [3] colour behind the Gaussians (default black).
     num_devices: devices to split the M samples over (static).
 
@@ -214,7 +214,7 @@ def score_cameras(model, cameras: Camera, z, *, settings: RenderSettings, backgr
   """U (Eq. 10) of every camera of a batch: the candidate scorer of Ours (Sel.).
 
   Grows the intersection budget until no render overflows (never reports a truncated
-  image), like `mfsample.render.budget.render_with_budget`.
+  image), like `mfsample.renderer.budget.render_with_budget`.
 
   Args:
     model: `mfsample.model.Model`.

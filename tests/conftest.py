@@ -20,13 +20,13 @@ if "xla_backend_optimization_level" not in os.environ.get("XLA_FLAGS", ""):
 
 import pytest  # noqa: E402
 
-from configs import train_synthetic  # noqa: E402
+from configs import train as train_configs  # noqa: E402
 from mfsample.train import data as data_lib  # noqa: E402
 
 
 def tiny_config(kind="lowrank", **overrides):
-  """The synthetic training config with `sampler.kind = kind` and dotted `overrides`."""
-  config = train_synthetic.get_config()
+  """The tiny training config with `sampler.kind = kind` and dotted `overrides`."""
+  config = train_configs.get_config("tiny")
   config.sampler.kind = kind
   for name, value in overrides.items():
     node = config
@@ -40,4 +40,4 @@ def tiny_config(kind="lowrank", **overrides):
 @pytest.fixture(scope="session")
 def tiny_dataset():
   """`Dataset` of random Gaussians seen by 12 training and 4 test cameras at 32 x 32."""
-  return data_lib.load_dataset(train_synthetic.get_config().data)
+  return data_lib.load_dataset(train_configs.get_config("tiny").data)

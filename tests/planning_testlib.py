@@ -1,21 +1,17 @@
 """Shared pieces of the uncertainty and planning tests (tiny sizes, built once per session).
 
-The tests build everything from `configs/camera_planning_tiny.py`, so that equal training
+The tests build everything from `configs/camera_planning.py:tiny`, so that equal training
 configs share one compilation of the jitted training step (it is jitted module-wide with its
 settings static), and the expensive objects are cached here for the whole session.
 """
 
 import functools
-import os
-import subprocess
-import sys
-from pathlib import Path
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from configs import camera_planning_tiny
+from configs import camera_planning
 from mfsample.model import GROUPS, SamplerSpec, init_model
 from mfsample.planning import poses, runner
 from mfsample.planning.pool import make_pool
@@ -23,23 +19,8 @@ from mfsample.planning.pool import make_pool
 BOUNDS = tuple((g, b) for g, b in zip(GROUPS, (1.0, 20.0, 2.0, 20.0, 0.5, 0.5), strict=True))
 
 
-REPO = Path(__file__).resolve().parents[1]
-
-
-def run_benchmark(name, *args, check=True):
-  """`benchmarks/<name>.py` on the tiny config in a subprocess (absl flags parse once per
-  process); with `check`, a failure fails the test with the script's stderr."""
-  env = {**os.environ, "PYTHONPATH": str(REPO)}
-  proc = subprocess.run(
-      [sys.executable, f"benchmarks/{name}.py", "--config=configs/camera_planning_tiny.py",
-       *args], cwd=REPO, env=env, capture_output=True, text=True, timeout=600)
-  if check:
-    assert proc.returncode == 0, proc.stderr[-3000:]
-  return proc
-
-
 def tiny_config():
-  return camera_planning_tiny.get_config()
+  return camera_planning.get_config("tiny")
 
 
 @functools.cache

@@ -55,18 +55,6 @@ def _assert_cameras_close(a, b, atol=1e-5):
   assert (a.width, a.height) == (b.width, b.height)
 
 
-def test_exports_exist_and_are_documented():
-  import inspect
-
-  import mfsample.data
-  for name in mfsample.data.__all__:
-    doc = inspect.getdoc(getattr(mfsample.data, name))
-    assert doc and len(doc) > 20, f"mfsample.data.{name} has no real docstring"
-
-
-# ------------------------------------------------------------------ Blender format
-
-
 def test_export_load_round_trip(tmp_path):
   views = _views()
   export_blender(tmp_path, views, split="train")

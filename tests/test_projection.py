@@ -6,7 +6,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from mfsample import RenderSettings
-from mfsample.render.projection import covariance_3d, project_gaussians, quat_to_rotmat
+from mfsample.renderer.projection import covariance_3d, project_gaussians, quat_to_rotmat
 from mfsample.testing import orbit_camera, random_gaussians
 
 SETTINGS = RenderSettings()

@@ -10,7 +10,7 @@ import pytest
 
 from mfsample import Camera, Gaussians, RenderSettings, render
 from mfsample._pytree import replace
-from mfsample.render.reference import render_reference
+from mfsample.renderer.reference import render_reference
 from mfsample.testing import orbit_camera, random_gaussians
 
 # Small chunks and steps so that one tile's list spans many chunks and several loop steps.
@@ -266,7 +266,7 @@ def test_finite_for_tiny_inputs(num, width, height):
 
 
 def test_overflow_is_reported_and_budget_growth_restores_the_image():
-  from mfsample.render.budget import fit_budget, render_with_budget
+  from mfsample.renderer.budget import fit_budget, render_with_budget
 
   gaussians, cam = hard_scene(3)
   tight = RenderSettings(max_intersections=64, chunk_size=8, chunks_per_step=4)

@@ -4,7 +4,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from mfsample.render import sh
+from mfsample.renderer import sh
 
 
 def _sphere_points(n):

@@ -5,8 +5,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from mfsample import RenderSettings
-from mfsample.render import projection, tiles
-from mfsample.render.tiles import tile_grid
+from mfsample.renderer import projection, tiles
+from mfsample.renderer.tiles import tile_grid
 from mfsample.testing import orbit_camera, random_gaussians
 
 W, H = 70, 50

@@ -12,7 +12,7 @@ from conftest import tiny_config
 
 from mfsample import samplers
 from mfsample.export_ply import read_ply
-from mfsample.render import render
+from mfsample.renderer import render
 from mfsample.train import checkpoint as ckpt
 from mfsample.train import data as data_lib
 from mfsample.train import densify as densify_lib

@@ -23,8 +23,9 @@ def test_blender_without_data_fails_clearly(tmp_path):
     data_lib.load_dataset(config.data)
 
 
-def test_relative_paths_resolve_against_the_repository_root():
-  assert data_lib.resolve_path("configs") == data_lib.REPO_ROOT / "configs"
+def test_relative_paths_resolve_against_the_working_directory(tmp_path, monkeypatch):
+  monkeypatch.chdir(tmp_path)
+  assert data_lib.resolve_path("scene") == tmp_path.resolve() / "scene"
   assert str(data_lib.resolve_path("/abs/path")) == "/abs/path"
 
 

@@ -5,12 +5,12 @@
 * `strategies`: random, farthest point, ActiveNeRF-style variance, FisherRF, ACP and the
   three variants of ours, behind one interface.
 * `runner`: the protocol as pure steps and a thin, resumable loop (`run_camera_planning`).
-* `workdirs`: what a planning workdir holds and when a later call may add runs to it
-  (`restore_runs` seeds a workdir with a results directory's finished runs).
+* `workdirs`: what a planning workdir holds and when a later call may add runs to it.
 * `tables`: Table 1, the paired differences and the other tables, from run records.
-* `by_seeds`: those tables over a range of a run's seeds (or of its final models).
+* `config`: the protocol's config and its defaults (`default_config`).
 """
 
+from mfsample.planning.config import default_config
 from mfsample.planning.optimize import (
                                         OptimizeResult,
                                         OptimizeSettings,
@@ -27,11 +27,10 @@ from mfsample.planning.poses import (
 )
 from mfsample.planning.runner import run_camera_planning
 from mfsample.planning.strategies import NAMES, Choice, Inputs, Strategy, make_strategy
-from mfsample.planning.workdirs import restore_runs
 
 __all__ = [
     "NAMES", "Choice", "Inputs", "OptimizeResult", "OptimizeSettings", "SphereSpec",
-    "Strategy", "camera_to_uv", "make_strategy", "optimize_se3", "optimize_spherical",
-    "perturb_camera", "project_uv", "restore_runs", "run_camera_planning", "se3_exp",
+    "Strategy", "camera_to_uv", "default_config", "make_strategy", "optimize_se3",
+    "optimize_spherical", "perturb_camera", "project_uv", "run_camera_planning", "se3_exp",
     "spherical_camera",
 ]

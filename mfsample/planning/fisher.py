@@ -32,8 +32,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from mfsample.model import activate
-from mfsample.render import RenderSettings, render
-from mfsample.render.budget import render_with_budget
+from mfsample.renderer import RenderSettings, render
+from mfsample.renderer.budget import render_with_budget
 from mfsample.uncertainty import map_cameras
 
 # FisherRF leaves the rotations out (its default `--filter_out_grad rotation`).

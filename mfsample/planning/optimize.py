@@ -29,8 +29,8 @@ import numpy as np
 import optax
 
 from mfsample.planning import poses
-from mfsample.render.budget import render_with_budget
-from mfsample.render.settings import RenderSettings
+from mfsample.renderer.budget import render_with_budget
+from mfsample.renderer.settings import RenderSettings
 from mfsample.uncertainty import default_num_devices, sample_gaussians, uncertainty_of_samples
 
 

@@ -11,7 +11,6 @@
 
 import math
 from collections.abc import Callable
-from pathlib import Path
 from typing import NamedTuple
 
 import jax.numpy as jnp
@@ -20,10 +19,9 @@ import numpy as np
 from mfsample.camera import Camera
 from mfsample.data.views import Views
 from mfsample.planning import poses
-from mfsample.render import RenderSettings, render
-from mfsample.render.budget import render_with_budget
-
-REPO_ROOT = Path(__file__).resolve().parents[2]
+from mfsample.renderer import RenderSettings, render
+from mfsample.renderer.budget import render_with_budget
+from mfsample.train.data import resolve_path
 
 
 class Pool(NamedTuple):
@@ -48,12 +46,6 @@ class Pool(NamedTuple):
   bounds: tuple
   sphere: poses.SphereSpec
   oracle: Callable | None
-
-
-def resolve_path(path):
-  """`path` if absolute, else relative to the repository root."""
-  p = Path(str(path)).expanduser()
-  return p if p.is_absolute() else (REPO_ROOT / p).resolve()
 
 
 def make_pool(cfg) -> Pool:
@@ -107,7 +99,7 @@ def synthetic_scene(num, seed, radius=0.6, sh_degree=0, shape="shell"):
   sees one side of a closed surface and none sees through it) or a "cloud" (in the cube
   [-radius, radius]^3)."""
   from mfsample.gaussians import Gaussians
-  from mfsample.render.sh import rgb_to_sh_dc
+  from mfsample.renderer.sh import rgb_to_sh_dc
 
   rng = np.random.default_rng(seed)
   k = (sh_degree + 1) ** 2

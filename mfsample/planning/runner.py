@@ -41,8 +41,8 @@ from mfsample.data.views import Views
 from mfsample.model import mean_gaussians
 from mfsample.planning import figures, poses, strategies, tables, training, variance, workdirs
 from mfsample.planning.pool import Pool, make_pool, stack_cameras
-from mfsample.render import render
-from mfsample.render.budget import render_with_budget
+from mfsample.renderer import render
+from mfsample.renderer.budget import render_with_budget
 
 
 class Selected(NamedTuple):
@@ -402,8 +402,8 @@ def run_camera_planning(config, workdir):
 
   Writes to `workdir`: `runs/<strategy>-seed<seed>.json` (as each finishes; existing ones
   are loaded, not recomputed), `results.json`, `table.md`, `cameras.png`, `landscape.png`
-  (+ `landscape.npz`), `config.json`. results.json's `seconds.calls` lists the wall-clock
-  of every call that finished on the workdir since its runs were started, oldest first.
+  (+ `landscape.npz`) and `config.json`. A workdir whose finished runs used another
+  protocol is refused before anything is written (`workdirs.check_resumable`).
 
   Returns:
     the results dict (as in `results.json`).
@@ -411,20 +411,16 @@ def run_camera_planning(config, workdir):
   from tqdm.auto import tqdm
 
   t_start = time.perf_counter()
-  os.makedirs(os.path.join(workdir, "runs"), exist_ok=True)
   workdirs.check_resumable(config, workdir)
-  had_runs = workdirs.holds_runs(workdir)
+  os.makedirs(os.path.join(workdir, "runs"), exist_ok=True)
   with open(os.path.join(workdir, "config.json"), "w") as f:
     f.write(config.to_json_best_effort(indent=2))
-  t0 = time.perf_counter()
   pool = make_pool(config.data)
-  pool_seconds = time.perf_counter() - t0
   names = list(config.strategies)
+  skipped = []
   if pool.oracle is None:
     skipped = [n for n in names if strategies.make_strategy(n, config).new_poses]
     names = [n for n in names if n not in skipped]
-  else:
-    skipped = []
   todo = [(seed, name) for seed in config.seeds for name in names]
   eval_views = tuple(int(n) for n in config.eval_views)
   rounds = int(config.max_views) - 1
@@ -434,7 +430,6 @@ def run_camera_planning(config, workdir):
   trainer = Trainer(config, pool)
   budgets = {}
   records = []
-  new_runs = []
   bar = tqdm(total=len(todo) * (rounds + len(eval_views)), desc="camera planning",
              disable=not config.progress, dynamic_ncols=True)
   for seed, name in todo:
@@ -459,50 +454,27 @@ def run_camera_planning(config, workdir):
     record = run_record(strategy, seed, selected, metrics, time.perf_counter() - t_run, pool)
     write_json(path, record, indent=1)
     records.append(record)
-    new_runs.append(workdirs.run_name(name, seed))
   bar.close()
 
   summary = tables.summarise(records, eval_views)
-  title = (f"Active camera planning on `{pool.name}`: {len(config.seeds)} seed(s), "
-           f"mean ± std over seeds.")
-  table = tables.table_markdown(summary, eval_views, title=title)
   labels = {rec["strategy"]: rec["label"] for rec in records}
   paired = {}
-  for reference in config.paired_references:
-    if reference not in labels or len(config.seeds) < 2:
-      continue
-    paired[reference] = tables.paired_differences(records, eval_views, reference)
-    table += (f"\nPaired by seed (same initial view and initialisation), PSNR minus "
-              f"{labels[reference]}'s, mean ± standard error:\n\n")
-    table += tables.paired_markdown(paired[reference], labels, labels[reference], eval_views)
+  if len(config.seeds) > 1:
+    paired = {ref: tables.paired_differences(records, eval_views, ref)
+              for ref in config.paired_references if ref in labels}
   optimisation = tables.optimisation_summary(records)
-  if optimisation:
-    table += ("\nThe camera ascent of the optimising strategies, over all rounds and seeds "
-              "(its U: M = strategy.optimize.samples at its image size; selection's U: as "
-              "candidates are scored):\n\n" + tables.optimisation_markdown(optimisation, labels))
   run_seconds = tables.seconds_summary(records)
-  table += ("\nWall-clock of the runs, as each run recorded it (other work on the machine "
-            "included; a round whose model another run of the same seed trained earlier in "
-            "the call, such as the one-view model the \"Ours\" variants share, comes from "
-            "the trainer's cache and takes seconds):\n\n"
-            + tables.seconds_markdown(run_seconds, labels))
+  title = (f"Active camera planning on `{pool.name}`: {len(config.seeds)} seed(s), "
+           f"mean ± std over seeds.")
   with open(os.path.join(workdir, "table.md"), "w") as f:
-    f.write(table)
-  fig_seconds = 0.0
+    f.write(tables.report_markdown(summary, paired, optimisation, run_seconds, labels,
+                                   eval_views, title))
   if config.figures.enabled:
-    t0 = time.perf_counter()
     figures.camera_figure(records, pool, os.path.join(workdir, "cameras.png"),
                           seed=int(config.seeds[0]))
     land = landscape(config, pool, trainer, budgets)
     np.savez(os.path.join(workdir, "landscape.npz"), **land)
     figures.landscape_figure(land, os.path.join(workdir, "landscape.png"))
-    fig_seconds = time.perf_counter() - t0
-  # A workdir that already held runs keeps the earlier calls' totals (its runs' cost is
-  # their sum), also when this call's seeds or strategies are all new; an empty one starts
-  # the list afresh, whatever a stale results.json beside it says.
-  calls = workdirs.earlier_calls(workdir) if had_runs else []
-  total = time.perf_counter() - t_start
-  calls.append({"seconds": total, "new_runs": new_runs})
   results = {
       **workdirs.pool_record(pool), "seeds": list(config.seeds), "strategies": names,
       "skipped_strategies": skipped, "eval_views": list(eval_views),
@@ -510,8 +482,7 @@ def run_camera_planning(config, workdir):
       "final_steps": int(config.final_train.train.num_steps),
       "summary": summary, "paired_psnr": paired, "optimisation": optimisation,
       "run_seconds": run_seconds, "runs": records,
-      "seconds": {"total_this_call": total, "pool": pool_seconds, "figures": fig_seconds,
-                  "calls": calls},
+      "seconds_this_call": time.perf_counter() - t_start,
   }
   write_json(os.path.join(workdir, "results.json"), results, indent=1)
   return results

@@ -30,7 +30,7 @@ import numpy as np
 from mfsample import uncertainty as unc
 from mfsample.camera import Camera
 from mfsample.planning import acp, fisher, optimize, poses, variance
-from mfsample.render import RenderSettings
+from mfsample.renderer import RenderSettings
 
 LABELS = {
     "random": "Random",

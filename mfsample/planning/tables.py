@@ -1,8 +1,8 @@
 """The planning protocol's tables: Table 1 (mean ± std over seeds), differences paired by
 seed, the view optimisation's rounds and the wall-clock, as dicts and as markdown.
 
-Pure functions of run records (`runner.run_record`), shared by the runner's `table.md`,
-`by_seeds` and the benchmarks that re-judge view sets.
+Pure functions of run records (`runner.run_record`); `report_markdown` assembles the
+runner's `table.md` from them.
 """
 
 import numpy as np
@@ -192,3 +192,22 @@ def seconds_markdown(summary, labels, order=strategies.NAMES):
     round_cell = cell(e["round"]) if "round" in e else "-"
     lines.append(f"| {labels[name]} | {e['runs']} | {cell(e['run'])} | {round_cell} |")
   return "\n".join(lines) + "\n"
+
+
+def report_markdown(summary, paired, optimisation, run_seconds, labels, eval_views, title):
+  """`table.md`: Table 1, the paired differences (when there are several seeds), the
+  camera ascent of the optimising strategies and the wall-clock of the runs."""
+  text = table_markdown(summary, eval_views, title=title)
+  for reference, diffs in paired.items():
+    text += (f"\nPaired by seed (same initial view and initialisation), PSNR minus "
+             f"{labels[reference]}'s, mean ± standard error:\n\n")
+    text += paired_markdown(diffs, labels, labels[reference], eval_views)
+  if optimisation:
+    text += ("\nThe camera ascent of the optimising strategies, over all rounds and seeds "
+             "(its U: M = strategy.optimize.samples at its image size; selection's U: as "
+             "candidates are scored):\n\n" + optimisation_markdown(optimisation, labels))
+  text += ("\nWall-clock of the runs, as each run recorded it (a round whose model another "
+           "run of the same seed trained earlier in the call, such as the one-view model "
+           "the \"Ours\" variants share, comes from the trainer's cache):\n\n"
+           + seconds_markdown(run_seconds, labels))
+  return text

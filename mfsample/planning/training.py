@@ -75,7 +75,7 @@ def train_on_views(config, views, *, seed, bounds, pad_to, settings=None, state=
   every so many steps).
 
   Args:
-    config: a training config (`configs/train_default.py` layout) with `data.extent` and
+    config: a training config (`mfsample.train.default_config()` layout) with `data.extent` and
       `loss.volume_weight` set (see the module docstring).
     views: the training `Views` (1 <= len(views) <= pad_to).
     seed: seeds the initial point cloud, B_hat signs, the z sequence and the view order.

@@ -32,8 +32,8 @@ import numpy as np
 import optax
 
 from mfsample.model import mean_gaussians
-from mfsample.render import RenderSettings, render
-from mfsample.render.budget import render_with_budget
+from mfsample.renderer import RenderSettings, render
+from mfsample.renderer.budget import render_with_budget
 from mfsample.train.evaluate import render_mean
 from mfsample.uncertainty import map_cameras
 

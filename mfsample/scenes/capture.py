@@ -17,7 +17,7 @@ import tqdm
 
 from mfsample.camera import Camera
 from mfsample.data.views import Views
-from mfsample.render import sh as sh_lib
+from mfsample.renderer import sh as sh_lib
 from mfsample.scenes import cache as cache_lib
 from mfsample.scenes import mitsuba_bridge as bridge
 
@@ -90,7 +90,7 @@ def capture_sh_basis(scene, camera, *, degree=3, spp=DEFAULT_SH_SPP, cache_dir=N
   """Images of the scene lit by each real SH basis function as environment light.
 
   I_j is the linear radiance image under the environment L(d) = Y_j(d) (d: world direction
-  towards the sky; Y from `mfsample.render.sh.sh_basis`, same ordering). Y_j is signed, so
+  towards the sky; Y from `mfsample.renderer.sh.sh_basis`, same ordering). Y_j is signed, so
   its positive and negative parts are rendered separately and subtracted. Light transport
   is linear, so the image under the SH light L(d) = sum_j xi_j Y_j(d) is `relight(I, xi)`.
   The scene's fixed lights are not used; the background is black (radiance 0).

@@ -6,8 +6,10 @@ The public entry points:
 * `train_and_evaluate(config, workdir)` -> `TrainState`: the experiment (data from the
   config, checkpoints, metrics, images, `.ply`).
 * `make_setup`, `init_state`, `make_train_step`, `train_step`: the pieces, for custom loops.
+* `default_config()`: the training config with its defaults.
 """
 
+from mfsample.train.config import default_config
 from mfsample.train.loop import (
                                  TrainResult,
                                  TrainSetup,
@@ -27,5 +29,6 @@ from mfsample.train.step import (
 
 __all__ = [
     "DensifyStats", "StepConfig", "StepMetrics", "TrainResult", "TrainSetup", "TrainState",
-    "init_state", "make_setup", "make_train_step", "train", "train_and_evaluate", "train_step",
+    "default_config", "init_state", "make_setup", "make_train_step", "train",
+    "train_and_evaluate", "train_step",
 ]

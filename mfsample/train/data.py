@@ -19,12 +19,10 @@ import numpy as np
 from mfsample.camera import Camera
 from mfsample.data import load_blender
 from mfsample.data.views import Views
-from mfsample.render import render
-from mfsample.render.budget import render_with_budget
-from mfsample.render.settings import RenderSettings
+from mfsample.renderer import render
+from mfsample.renderer.budget import render_with_budget
+from mfsample.renderer.settings import RenderSettings
 from mfsample.testing import random_gaussians
-
-REPO_ROOT = Path(__file__).resolve().parents[2]
 
 
 class Dataset(NamedTuple):
@@ -45,9 +43,8 @@ class Dataset(NamedTuple):
 
 
 def resolve_path(path):
-  """`path` if absolute, else relative to the repository root."""
-  p = Path(os.path.expanduser(str(path)))
-  return p if p.is_absolute() else (REPO_ROOT / p).resolve()
+  """`path` with `~` expanded, made absolute (relative paths: to the working directory)."""
+  return Path(os.path.expanduser(str(path))).resolve()
 
 
 def load_dataset(cfg) -> Dataset:
@@ -121,8 +118,8 @@ def _blender_views(cfg, background):
   path = resolve_path(cfg.path)
   if not (path / "transforms_train.json").is_file():
     raise FileNotFoundError(
-        f"No NeRF Synthetic scene at {path} (config.data.path={cfg.path!r}, relative paths "
-        f"are resolved against {REPO_ROOT}). Expected transforms_train.json there.")
+        f"No NeRF Synthetic scene at {path} (config.data.path={cfg.path!r}; relative paths "
+        f"are resolved against the working directory). Expected transforms_train.json there.")
   train = load_blender(str(path), "train", downscale=cfg.downscale, background=background)
   test = load_blender(str(path), "test", downscale=cfg.downscale, background=background)
   if cfg.test_every > 1:

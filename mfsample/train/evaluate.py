@@ -12,8 +12,8 @@ import numpy as np
 from mfsample import metrics
 from mfsample import uncertainty as uncertainty_lib
 from mfsample.model import mean_gaussians
-from mfsample.render import render
-from mfsample.render.budget import render_with_budget
+from mfsample.renderer import render
+from mfsample.renderer.budget import render_with_budget
 
 
 class EvalResult(NamedTuple):

@@ -17,8 +17,8 @@ import numpy as np
 
 from mfsample._json import without_fields, write_json
 from mfsample.model import GROUPS, SamplerSpec, group_shapes, init_model
-from mfsample.render.budget import BudgetExceededError, fit_budget
-from mfsample.render.settings import RenderSettings
+from mfsample.renderer.budget import BudgetExceededError, fit_budget
+from mfsample.renderer.settings import RenderSettings
 from mfsample.samplers import sobol_z
 from mfsample.train import checkpoint as ckpt
 from mfsample.train import data as data_lib
@@ -214,7 +214,7 @@ def train(config, views, key=None, *, setup=None, state=None, bounds=None,
   exactly where a killed one stopped.
 
   Args:
-    config: a training config (`configs/train_default.py`); `config.train.num_steps`
+    config: a training config (`default_config()`); `config.train.num_steps`
       sets the length.
     views: training `Views`.
     key: optional PRNG key replacing `config.seed`.

@@ -19,8 +19,8 @@ import optax
 
 from mfsample import samplers
 from mfsample.model import Model, project_spread
-from mfsample.render.render import render
-from mfsample.render.settings import RenderSettings
+from mfsample.renderer.render import render
+from mfsample.renderer.settings import RenderSettings
 from mfsample.train import losses, optim
 
 

@@ -1,0 +1,119 @@
+"""`render`: chains projection -> colour -> tile intersection -> compositing."""
+
+import functools
+from typing import NamedTuple
+
+import chex
+import jax
+import jax.numpy as jnp
+
+from mfsample.camera import Camera
+from mfsample.gaussians import Gaussians
+from mfsample.renderer import sh as sh_lib
+from mfsample.renderer.composite import composite
+from mfsample.renderer.projection import project_gaussians, view_directions
+from mfsample.renderer.settings import RenderSettings
+from mfsample.renderer.tiles import TileStats, intersect_tiles
+
+
+class RenderOutput(NamedTuple):
+  """What `render` returns.
+
+  Attributes:
+    rgb: [H, W, C] blended colour over the background (C = 3, or F when `features` is given).
+    alpha: [H, W] accumulated opacity, 1 - final transmittance.
+    depth: [H, W] alpha-weighted camera z-depth, sum_i w_i z_i, *not* normalised by alpha:
+      it fades to 0 where alpha does. `expected_depth()` divides it out.
+    stats: `TileStats` (intersections, busiest tile, overflow flag).
+    radii: [N] screen-space radius in pixels of each Gaussian's footprint (0 when culled;
+      no gradient). Training prunes Gaussians that grow too large on screen.
+    visible: [N] bool, projected in front of the near plane, on screen and live.
+  """
+
+  rgb: chex.Array
+  alpha: chex.Array
+  depth: chex.Array
+  stats: TileStats
+  radii: chex.Array
+  visible: chex.Array
+
+  def expected_depth(self, eps=1e-6):
+    """[H, W] depth / alpha: the mean z of what was hit (0 where alpha <= eps)."""
+    ok = self.alpha > eps
+    return jnp.where(ok, self.depth / jnp.where(ok, self.alpha, 1.0), 0.0)
+
+
+@functools.partial(jax.jit, static_argnames=("settings",))
+def render(gaussians: Gaussians, camera: Camera, *, background=None,
+           settings: RenderSettings = RenderSettings(), features=None,
+           screen_offset=None) -> RenderOutput:
+  """Renders Gaussians into one camera with the tile-based 3DGS rasteriser.
+
+  Differentiable w.r.t. every array in `gaussians`, `camera` (pose and intrinsics),
+  `background` and `features`. It is jitted with `settings` static (hashable), so a call
+  outside `jax.jit` is compiled too and is inlined inside one; vmap it over a batched
+  `Camera` or a batched `Gaussians` (leading axis on every leaf).
+
+  Args:
+    gaussians: `Gaussians` with N >= 0 entries (unbatched).
+    camera: an unbatched `Camera`.
+    background: [C] colour behind the Gaussians (default: zeros).
+    settings: `RenderSettings` (static).
+    features: optional [N, F] per-Gaussian values blended instead of the SH colour
+      (uncertainty maps, relighting). The output `rgb` then has F channels and no clamping.
+    screen_offset: optional [N, 2] pixel offset added to the projected 2D centres. Pass
+      zeros and differentiate w.r.t. it to get the loss gradient w.r.t. the screen-space
+      centres, which 3DGS densification thresholds (Kerbl et al. 2023, Sec. 5.2).
+
+  Returns:
+    `RenderOutput`.
+  """
+  if not isinstance(camera, Camera):
+    raise TypeError(f"camera must be a mfsample.Camera, got {type(camera).__name__}")
+  if camera.batch_shape:
+    raise ValueError(f"render takes one camera; got a batch {camera.batch_shape}. "
+                     "Use jax.vmap over the camera for batches.")
+  gaussians.validate()
+  dtype = gaussians.means.dtype
+  n = gaussians.num_gaussians
+  if features is not None:
+    features = jnp.asarray(features)
+    if features.ndim != 2 or features.shape[0] != n:
+      raise ValueError(f"features must have shape [N={n}, F], got {features.shape}")
+    if not jnp.issubdtype(features.dtype, jnp.floating):
+      raise ValueError(f"features must be floating point, got {features.dtype}")
+  if screen_offset is not None:
+    screen_offset = jnp.asarray(screen_offset)
+    chex.assert_shape(screen_offset, (n, 2))
+  if n == 0:  # one masked placeholder keeps every array non-empty
+    gaussians = Gaussians.empty(1, gaussians.sh_degree, dtype)
+    if features is not None:
+      features = jnp.zeros((1, features.shape[1]), features.dtype)
+    if screen_offset is not None:
+      screen_offset = jnp.zeros((1, 2), dtype)
+
+  proj = project_gaussians(gaussians.means, gaussians.scales, gaussians.quats,
+                           gaussians.opacities, gaussians.mask, camera, settings)
+  if features is None:
+    dirs = view_directions(gaussians.means, camera)
+    colors = sh_lib.sh_to_color(gaussians.sh, dirs)
+  else:
+    colors = features.astype(dtype)
+  num_channels = colors.shape[-1]
+  if background is None:
+    background = jnp.zeros((num_channels,), dtype)
+  background = jnp.asarray(background, dtype)
+  chex.assert_shape(background, (num_channels,))
+
+  means2d = proj.means2d
+  if screen_offset is not None:
+    means2d = means2d + jnp.where(proj.valid[:, None], screen_offset.astype(dtype), 0.0)
+  layout = intersect_tiles(proj, camera.width, camera.height, settings)
+  blend_in = jnp.concatenate([colors, proj.depths[:, None]], axis=-1)
+  opacities = jnp.where(proj.valid, gaussians.opacities, 0.0)
+  blended, alpha = composite(layout, means2d, proj.conics, opacities, blend_in,
+                             camera.width, camera.height, settings)
+  rgb = blended[..., :num_channels] + (1.0 - alpha)[..., None] * background
+  return RenderOutput(rgb=rgb, alpha=alpha, depth=blended[..., num_channels],
+                      stats=layout.stats, radii=proj.radii[:n], visible=proj.valid[:n])
+

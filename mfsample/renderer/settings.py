@@ -1,0 +1,80 @@
+"""Static renderer settings: one frozen, hashable object, passed as a static argument."""
+
+import dataclasses
+
+
+@dataclasses.dataclass(frozen=True)
+class RenderSettings:
+  """Everything about a render that is not a differentiable input.
+
+  Attributes:
+    tile_size: side of a square screen tile in pixels.
+    alpha_max: per-Gaussian opacity clamp (3DGS: 0.99).
+    alpha_min: contributions below this alpha are skipped (3DGS: 1/255).
+    transmittance_min: a pixel stops accumulating once its transmittance would fall below
+      this (3DGS: 1e-4); the Gaussian that would cross it is not blended.
+    near_plane: Gaussians whose centre has camera depth z < near_plane are culled.
+    eps2d: isotropic screen-space dilation added to every 2D covariance (pixels^2); a
+      low-pass filter that also keeps the 2D covariance invertible.
+    radius_sigma: a Gaussian affects only pixels within this many standard deviations
+      (Mahalanobis distance); its screen bounding box uses the same radius. With this cut
+      the image does not depend on `tile_size`.
+    max_intersections: budget of (tile, Gaussian) pairs, counted after padding each tile's
+      list to a multiple of `chunk_size`. Exceeding it sets `stats.overflow`; see
+      `mfsample.renderer.fit_budget` to grow it. Must be a multiple of
+      chunk_size * chunks_per_step.
+    chunk_size: Gaussians composited together in one dense block (per tile).
+    chunks_per_step: chunks processed per step of the compositing loop; the backward pass
+      keeps the activations of one step only, so this bounds memory.
+  """
+
+  tile_size: int = 16
+  alpha_max: float = 0.99
+  alpha_min: float = 1.0 / 255.0
+  transmittance_min: float = 1e-4
+  near_plane: float = 0.2
+  eps2d: float = 0.3
+  radius_sigma: float = 3.0
+  max_intersections: int = 1 << 16
+  chunk_size: int = 32
+  chunks_per_step: int = 16
+
+  def __post_init__(self):
+    if self.tile_size < 1:
+      raise ValueError(f"tile_size must be >= 1, got {self.tile_size}")
+    if not 0.0 < self.alpha_max <= 1.0:
+      raise ValueError(f"alpha_max must be in (0, 1], got {self.alpha_max}")
+    if not 0.0 <= self.alpha_min < self.alpha_max:
+      raise ValueError(f"alpha_min must be in [0, alpha_max), got {self.alpha_min}")
+    if not 0.0 < self.transmittance_min < 1.0:
+      raise ValueError(f"transmittance_min must be in (0, 1), got {self.transmittance_min}")
+    if self.radius_sigma <= 0 or self.eps2d < 0 or self.near_plane <= 0:
+      raise ValueError("radius_sigma and near_plane must be > 0 and eps2d >= 0")
+    if self.chunk_size < 1 or self.chunks_per_step < 1:
+      raise ValueError("chunk_size and chunks_per_step must be >= 1")
+    step = self.chunk_size * self.chunks_per_step
+    if self.max_intersections < step or self.max_intersections % step:
+      raise ValueError(
+          f"max_intersections ({self.max_intersections}) must be a positive multiple of "
+          f"chunk_size * chunks_per_step ({step}).")
+
+  @property
+  def max_chunks(self):
+    return self.max_intersections // self.chunk_size
+
+  @classmethod
+  def holding(cls, budget, **fields):
+    """Settings with `fields` whose budget is the smallest whole number of compositing
+    steps (chunk_size x chunks_per_step intersections) that holds `budget`."""
+    step = (fields.get("chunk_size", cls.chunk_size)
+            * fields.get("chunks_per_step", cls.chunks_per_step))
+    return cls(max_intersections=max(1, -(-int(budget) // step)) * step, **fields)
+
+  def holding_budget(self, budget):
+    """These settings with the smallest valid budget that holds `budget`."""
+    fields = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)
+              if f.name != "max_intersections"}
+    return RenderSettings.holding(budget, **fields)
+
+  def replace(self, **changes):
+    return dataclasses.replace(self, **changes)
