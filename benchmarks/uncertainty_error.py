@@ -66,24 +66,19 @@ def _farthest_views(pool, config, seed, num_views):
 
 
 def run():
-  import jax.numpy as jnp
   import numpy as np
-  from scipy.stats import spearmanr
 
   from mfsample import uncertainty as unc
-  from mfsample.planning import poses, runner
+  from mfsample.planning import runner
   from mfsample.planning.pool import make_pool
-  from mfsample.renderer import RenderSettings
-  from mfsample.renderer.budget import render_with_budget
+  from mfsample.planning.u_error import u_against_error
 
   config = _CONFIG.value
   config.data.progress = False
   pool = make_pool(config.data)
   cands = pool.candidates
-  bg = jnp.asarray(pool.background, jnp.float32)
   counts = [int(v) for v in _VIEWS.value]
   seeds = [int(s) for s in _SEEDS.value]
-  small = poses.downscale_camera(cands.cameras, int(config.strategy.ours.score_downscale))
 
   trajectories = {seed: _farthest_views(pool, config, seed, max(counts)) for seed in seeds}
   rows = []
@@ -100,28 +95,17 @@ def run():
     train_seconds = []
     for seed, n in itertools.product(seeds, counts):
       selected = trajectories[seed][:n]
-      idx = [view.index for view in selected]
       t0 = time.perf_counter()
       model = trainer.round_model(kind, selected, seed)
       train_seconds.append(time.perf_counter() - t0)
-      (pred, _), settings["mean"] = render_with_budget(
-          runner.render_views,
-          settings.get("mean", RenderSettings(max_intersections=1 << 14)), model,
-          cands.cameras, bg, stats_of=lambda out: out[1])
-      error = np.mean((np.asarray(pred) - np.asarray(cands.images)) ** 2, axis=(1, 2, 3))
-      unused = np.ones(len(cands), bool)
-      unused[idx] = False
-      angle = poses.angle_to_nearest(cands.cameras, idx, pool.sphere.center)[unused]
       for m in per_m:
         z = unc.uncertainty_z(model, m, int(cfg.strategy.ours.z_seed))
-        out, settings["score"] = unc.score_cameras(
-            model, small, z,
-            settings=settings.get("score", RenderSettings(max_intersections=1 << 12)),
-            background=bg, num_devices=1)
-        u = np.asarray(out.values)[unused]
-        per_m[m].append((spearmanr(u, error[unused]).correlation,
-                         spearmanr(u, angle).correlation,
-                         spearmanr(error[unused], angle).correlation))
+        res = u_against_error(model, cands, [view.index for view in selected], z,
+                              background=pool.background, center=pool.sphere.center,
+                              score_downscale=int(config.strategy.ours.score_downscale),
+                              settings=settings)
+        settings = res.settings
+        per_m[m].append((res.rho_u_error, res.rho_u_angle, res.rho_error_angle))
     for m, values in per_m.items():
       values = np.asarray(values)
       row = {"round_steps": steps, "sampler": kind, "sampler_flag": sampler,

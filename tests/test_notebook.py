@@ -1,4 +1,4 @@
-"""The notebooks run top to bottom from their own folder (at a tiny size: MFSAMPLE_NOTEBOOK_TINY=1)."""
+"""The notebooks run top to bottom from their own folder, at a tiny size."""
 
 from pathlib import Path
 

@@ -1,0 +1,108 @@
+"""Config validation on entry: every error names the field, its value and what is allowed.
+
+Experiments call these before they write anything, so a bad command line fails at once
+with a message such as
+
+  config.train.checkpoint_every = 0: must be an integer >= 1
+
+instead of a ZeroDivisionError an hour later. `field` is a dotted path into the config
+(`"train.checkpoint_every"`); `prefix` names the config in messages (`"config.round_train"`).
+"""
+
+import math
+from numbers import Integral, Real
+
+
+class ConfigError(ValueError):
+  """A config field outside its valid range, or of the wrong type."""
+
+
+def get_field(config, field):
+  """The value at a dotted path of a ConfigDict (or nested dicts)."""
+  node = config
+  for part in field.split("."):
+    try:
+      node = node[part]
+    except (KeyError, AttributeError):
+      raise ConfigError(f"config.{field}: the config has no such field") from None
+  return node
+
+
+def _name(prefix, field):
+  return f"{prefix}.{field}"
+
+
+def check_int(config, field, *, minimum=None, maximum=None, optional=False, prefix="config"):
+  """An integer in [minimum, maximum] (None when `optional`). Returns it."""
+  value = get_field(config, field)
+  if value is None and optional:
+    return None
+  bounds = _bounds_text(minimum, maximum)
+  if (isinstance(value, bool) or not isinstance(value, Integral)
+      or (minimum is not None and value < minimum) or (maximum is not None and value > maximum)):
+    raise ConfigError(f"{_name(prefix, field)} = {value!r}: must be an integer{bounds}"
+                      + (" or None" if optional else ""))
+  return int(value)
+
+
+def check_float(config, field, *, minimum=None, maximum=None, above=None, below=None,
+                optional=False, prefix="config"):
+  """A finite number with minimum <= value <= maximum, above < value < below. Returns it."""
+  value = get_field(config, field)
+  if value is None and optional:
+    return None
+  ok = isinstance(value, Real) and not isinstance(value, bool) and math.isfinite(value)
+  ok = ok and (minimum is None or value >= minimum) and (maximum is None or value <= maximum)
+  ok = ok and (above is None or value > above) and (below is None or value < below)
+  if not ok:
+    parts = [t for t in (_bounds_text(minimum, maximum),
+                         f" > {above}" if above is not None else "",
+                         f" < {below}" if below is not None else "") if t]
+    raise ConfigError(f"{_name(prefix, field)} = {value!r}: must be a finite number"
+                      + ",".join(parts) + (" or None" if optional else ""))
+  return float(value)
+
+
+def check_choice(config, field, choices, *, prefix="config"):
+  """One of `choices`. Returns it."""
+  value = get_field(config, field)
+  if value not in choices:
+    raise ConfigError(f"{_name(prefix, field)} = {value!r}: must be one of "
+                      f"{', '.join(repr(c) for c in choices)}")
+  return value
+
+
+def check_sequence(config, field, *, item_choices=None, item_minimum=None, min_length=1,
+                   distinct=False, prefix="config"):
+  """A list or tuple of at least `min_length` items, each in `item_choices` / an integer
+  >= `item_minimum` when given, all different when `distinct`. Returns it as a tuple."""
+  value = get_field(config, field)
+  name = _name(prefix, field)
+  if isinstance(value, (str, bytes)) or not hasattr(value, "__len__"):
+    raise ConfigError(f"{name} = {value!r}: must be a list or tuple")
+  items = tuple(value)
+  if len(items) < min_length:
+    raise ConfigError(f"{name} = {value!r}: must hold at least {min_length} item(s)")
+  for item in items:
+    if item_choices is not None and item not in item_choices:
+      raise ConfigError(f"{name}: {item!r} is not one of "
+                        f"{', '.join(repr(c) for c in item_choices)}")
+    if item_minimum is not None and (isinstance(item, bool) or not isinstance(item, Integral)
+                                     or item < item_minimum):
+      raise ConfigError(f"{name}: {item!r} is not an integer >= {item_minimum}")
+  if distinct:
+    repeated = sorted({repr(i) for i in items if items.count(i) > 1})
+    if repeated:
+      raise ConfigError(f"{name} = {value!r}: repeats {', '.join(repeated)}; each must "
+                        "appear once")
+  return items
+
+
+def _bounds_text(minimum, maximum):
+  if minimum is not None and maximum is not None:
+    return f" in [{minimum}, {maximum}]"
+  if minimum is not None:
+    return f" >= {minimum}"
+  if maximum is not None:
+    return f" <= {maximum}"
+  return ""
