@@ -244,7 +244,7 @@ def init_spread(rng, num, shapes, spec, init_scales, dtype=np.float32):
     num: number of rows.
     shapes: {group: per-Gaussian shape} of the model (stochastic groups it lacks are skipped).
     spec: `SamplerSpec`.
-    init_scales: {group: float} multiplier of U[0, 1] (METHOD.md: 1e-3, times the scene
+    init_scales: {group: float} multiplier of U[0, 1] (the authors' code: 1e-3, times the scene
       extent for centres and log-scales).
 
   Returns:

@@ -1,4 +1,4 @@
-"""The active camera planning protocol (paper Sec. 5.1; METHOD.md Sec. 3): pure steps, thin loop.
+"""The active camera planning protocol (paper Sec. 5.1): pure steps, thin loop.
 
 For every seed and strategy:
 

@@ -21,10 +21,9 @@ from mfsample.renderer import sh as sh_lib
 from mfsample.scenes import cache as cache_lib
 from mfsample.scenes import mitsuba_bridge as bridge
 
-# Samples per pixel of ordinary captures (a perfect square: stratified sampling). Measured
-# with benchmarks/capture.py --pool: 100 + 50 views of the default scene at 100x100 in 220 s
-# on two cores shared with other jobs (load average ~5; ~0.9 s per view when less loaded),
-# under the 5-minute budget.
+# Samples per pixel of ordinary captures (a perfect square: stratified sampling): about
+# 1 s per 100 x 100 view with the scalar variant, 0.1 s with the LLVM one
+# (benchmarks/capture.py).
 DEFAULT_SPP = 36
 # SH basis captures render 2 (degree + 1)^2 - 1 = 31 lights per camera at degree 3.
 DEFAULT_SH_SPP = 16
