@@ -345,9 +345,12 @@ def main(argv):
   from mfsample._json import write_json
 
   # Every input is checked before the long measurements start.
-  check_run(_STOCHASTIC.value, "--stochastic")
-  check_run(_DETERMINISTIC.value, "--deterministic")
-  rank = read_train_step(_TRAIN_STEP.value) if _TRAIN_STEP.value else None
+  try:
+    check_run(_STOCHASTIC.value, "--stochastic")
+    check_run(_DETERMINISTIC.value, "--deterministic")
+    rank = read_train_step(_TRAIN_STEP.value) if _TRAIN_STEP.value else None
+  except FileNotFoundError as error:
+    raise app.UsageError(str(error)) from error
   started = time.time()
   dataset, model, settings = load_run(_STOCHASTIC.value, _DATA.value)
   uncertainty = samples_and_resolution(

@@ -160,7 +160,10 @@ def main(argv):
   from mfsample._bench import machine, require_scene_folder
   from mfsample._json import write_json
 
-  require_scene_folder(_DATA.value, "--data")
+  try:
+    require_scene_folder(_DATA.value, "--data")
+  except FileNotFoundError as error:
+    raise app.UsageError(str(error)) from error
   base = lego_config(_DATA.value, _SIZE.value, _STEPS.value)
   overrides = parse_overrides(_EXTRA.value)
   for name in _VARIANTS.value:  # fail on a bad name or field before any training
