@@ -66,13 +66,16 @@ def render(gaussians: Gaussians, camera: Camera, *, background=None,
       centres, which 3DGS densification thresholds (Kerbl et al. 2023, Sec. 5.2).
 
   Returns:
-    `RenderOutput`.
+    `RenderOutput`; all NaN for an invalid camera (`Camera.valid` is False).
   """
   if not isinstance(camera, Camera):
     raise TypeError(f"camera must be a mfsample.Camera, got {type(camera).__name__}")
   if camera.batch_shape:
     raise ValueError(f"render takes one camera; got a batch {camera.batch_shape}. "
                      "Use jax.vmap over the camera for batches.")
+  # An invalid camera (`Camera.valid`: non-finite or non-rigid pose, fx or fy <= 0) cannot
+  # raise under jit: its images are NaN, which every finiteness check downstream catches.
+  nan_if_invalid = jnp.where(camera.valid, 0.0, jnp.nan)
   gaussians.validate()
   dtype = gaussians.means.dtype
   n = gaussians.num_gaussians
@@ -114,6 +117,7 @@ def render(gaussians: Gaussians, camera: Camera, *, background=None,
   blended, alpha = composite(layout, means2d, proj.conics, opacities, blend_in,
                              camera.width, camera.height, settings)
   rgb = blended[..., :num_channels] + (1.0 - alpha)[..., None] * background
-  return RenderOutput(rgb=rgb, alpha=alpha, depth=blended[..., num_channels],
+  return RenderOutput(rgb=rgb + nan_if_invalid, alpha=alpha + nan_if_invalid,
+                      depth=blended[..., num_channels] + nan_if_invalid,
                       stats=layout.stats, radii=proj.radii[:n], visible=proj.valid[:n])
 

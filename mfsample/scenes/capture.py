@@ -116,7 +116,8 @@ def capture_sh_basis(scene, camera, *, degree=3, spp=DEFAULT_SH_SPP, cache_dir=N
   path = cache_lib.entry_path(cache_dir or cache_lib.default_cache_dir(), scene, "sh_basis",
                               key)
   if cache:
-    stored = cache_lib.load(path)
+    size = (camera.height, camera.width)
+    stored = cache_lib.load(path, {"basis": ((degree + 1) ** 2,) + size + (3,)})
     if stored is not None:
       return stored["basis"]
   basis = sh_environment_texels(degree)
@@ -194,7 +195,9 @@ def _capture_entries(scene, cameras, *, spp, cache_dir, variant, cache, progress
     key = cache_lib.capture_key("rgbad", scene, camera, spp=spp, variant=variant,
                                 sampler=bridge.SAMPLER)
     path = cache_lib.entry_path(root, scene, "rgbad", key)
-    entry = cache_lib.load(path) if cache else None
+    size = (camera.height, camera.width)
+    entry = cache_lib.load(path, {"radiance": size + (3,), "alpha": size,
+                                  "depth": size}) if cache else None
     if entry is None:
       if mi_scene is None:
         mi_scene = bridge.build_scene(scene, variant)
