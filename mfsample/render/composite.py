@@ -11,7 +11,8 @@ Transmittance is accumulated in log space. Within a chunk of C Gaussians the exc
 prefix sum of log(1 - alpha) is one small matrix product with a strictly lower-triangular
 matrix; chunks of the same tile are chained within a step by a second such product, and
 across steps by a carry. The weighted sums of features are a batched matrix product too, so
-the inner loop is dense linear algebra on [C, tile_size^2] blocks.
+the inner loop is dense linear algebra on [C, tile_size^2] blocks. The products run in full
+float32 (`precision.py`).
 
 The loop runs over steps of `chunks_per_step` chunks. Steps past the last used chunk are
 skipped (`lax.cond`), so an over-provisioned budget costs little; each step is
@@ -26,6 +27,7 @@ import jax
 import jax.numpy as jnp
 from jax.custom_batching import custom_vmap
 
+from mfsample.render.precision import MATMUL
 from mfsample.render.tiles import TileLayout, tile_grid
 
 
@@ -101,16 +103,17 @@ def composite(layout: TileLayout, means2d, conics, opacities, features, width, h
     log_keep = jnp.log1p(-alpha)  # >= log(1 - alpha_max): finite
 
     # log T before each Gaussian = carry + earlier chunks of the tile + earlier in chunk.
-    within = log_keep @ strict_upper_c  # [G, P, C]
+    within = jnp.matmul(log_keep, strict_upper_c, precision=MATMUL)  # [G, P, C]
     chunk_total = jnp.sum(log_keep, axis=-1)  # [G, P]
     same_tile = strict_lower_g & (tile[:, None] == tile[None, :])
-    before_chunk = jnp.where(same_tile, 1.0, 0.0).astype(dtype) @ chunk_total
+    before_chunk = jnp.matmul(jnp.where(same_tile, 1.0, 0.0).astype(dtype), chunk_total,
+                              precision=MATMUL)
     before_chunk += jnp.where((tile == prev_tile)[:, None], prev_log_t[None, :], 0.0)
     log_t = before_chunk[:, :, None] + within
 
     include = log_t + log_keep >= log_t_min
     weight = jnp.where(include, alpha * jnp.exp(log_t), 0.0)
-    blended = jnp.einsum("gpc,gcf->gpf", weight, x.features)  # [G, P, F]
+    blended = jnp.einsum("gpc,gcf->gpf", weight, x.features, precision=MATMUL)  # [G, P, F]
     coverage = jnp.sum(weight, axis=-1)  # [G, P]
     new_carry = (tile[-1], before_chunk[-1] + chunk_total[-1])
     return new_carry, (blended, coverage)

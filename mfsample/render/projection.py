@@ -12,6 +12,7 @@ import jax
 import jax.numpy as jnp
 
 from mfsample import numerics
+from mfsample.render.precision import MATMUL
 
 # 3DGS evaluates the Jacobian at the centre clamped to 1.3x the half field of view, so that
 # Gaussians far off screen do not get exploding screen-space footprints.
@@ -43,7 +44,7 @@ def quat_to_rotmat(quats):
 def covariance_3d(scales, quats):
   """[N, 3] scales, [N, 4] quats -> [N, 3, 3] world covariance R S S^T R^T."""
   m = quat_to_rotmat(quats) * scales[..., None, :]
-  return m @ jnp.swapaxes(m, -1, -2)
+  return jnp.matmul(m, jnp.swapaxes(m, -1, -2), precision=MATMUL)
 
 
 def project_gaussians(means, scales, quats, opacities, mask, camera, settings):
@@ -64,7 +65,7 @@ def project_gaussians(means, scales, quats, opacities, mask, camera, settings):
   """
   dtype = means.dtype
   rot = camera.rotation.astype(dtype)
-  p_cam = means @ rot.T + camera.translation.astype(dtype)
+  p_cam = jnp.matmul(means, rot.T, precision=MATMUL) + camera.translation.astype(dtype)
   x, y, z = p_cam[:, 0], p_cam[:, 1], p_cam[:, 2]
   in_front = z > settings.near_plane
   z_safe = jnp.where(in_front, z, 1.0)  # double-where: culled rows never divide by ~0
@@ -89,8 +90,9 @@ def project_gaussians(means, scales, quats, opacities, mask, camera, settings):
   ], axis=-2)  # [N, 2, 3]
 
   cov_world = covariance_3d(scales, quats)
-  jw = jac @ rot  # [N, 2, 3]
-  cov2d = jw @ cov_world @ jnp.swapaxes(jw, -1, -2)
+  jw = jnp.matmul(jac, rot, precision=MATMUL)  # [N, 2, 3]
+  cov2d = jnp.matmul(jnp.matmul(jw, cov_world, precision=MATMUL), jnp.swapaxes(jw, -1, -2),
+                     precision=MATMUL)
   a = cov2d[:, 0, 0] + settings.eps2d
   b = cov2d[:, 0, 1]
   c = cov2d[:, 1, 1] + settings.eps2d
