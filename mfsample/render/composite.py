@@ -1,11 +1,17 @@
 """Stage 3: front-to-back alpha compositing of the chunked tile lists (3DGS rules).
 
-For pixel p and the depth-ordered Gaussians i of its tile (3DGS, Kerbl et al. 2023, Eq. 3):
+For pixel p and the depth-ordered Gaussians i of its tile (3DGS, Kerbl et al. 2023, Eq. 3),
+with o_i the opacity, d_i(p) the Mahalanobis distance of p from the projected centre and
+f_i the blended features:
 
-  alpha_i = min(alpha_max, o_i exp(-d_i(p)^2 / 2)),  skipped if alpha_i < alpha_min
-            or the Mahalanobis distance d_i(p) > radius_sigma,
+  alpha_i = min(alpha_max, o_i exp(-d_i(p)^2 / 2)),  skipped (alpha_i = 0) where
+            d_i(p) > r(o_i) = min(radius_sigma, sqrt(2 ln(o_i / alpha_min))),
+            i.e. where alpha_i < alpha_min or d_i(p) > radius_sigma,
   T_i     = prod_{j < i} (1 - alpha_j),
   C(p)    = sum_i alpha_i T_i f_i, stopping before the first i with T_i (1 - alpha_i) < T_min.
+
+The tile lists hold each Gaussian in every tile its footprint of radius r(o) sqrt(lambda_max)
+pixels touches (`projection.py`), so every pixel where the rule lets it contribute sees it.
 
 Transmittance is accumulated in log space. Within a chunk of C Gaussians the exclusive
 prefix sum of log(1 - alpha) is one small matrix product with a strictly lower-triangular
@@ -98,6 +104,7 @@ def composite(layout: TileLayout, means2d, conics, opacities, features, width, h
     ca, cb, cc = (x.conics[:, None, :, k] for k in range(3))
     power = -0.5 * (ca * dx * dx + cc * dy * dy) - cb * dx * dy
     alpha = jnp.minimum(settings.alpha_max, x.opacities[:, None, :] * jnp.exp(power))
+    # d <= r(o): the alpha test is d <= sqrt(2 ln(o / alpha_min)), the power test the cap.
     keep = x.live[:, None, :] & (power >= cut) & (alpha >= settings.alpha_min)
     alpha = jnp.where(keep, alpha, 0.0)
     log_keep = jnp.log1p(-alpha)  # >= log(1 - alpha_max): finite

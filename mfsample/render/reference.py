@@ -2,8 +2,12 @@
 
 Written separately and as plainly as possible, as the ground truth that the tiled renderer is
 tested against. It shares only the quaternion and SH helpers (tested on their own). Memory is
-O(H W N): for small test scenes only. Every product runs in full float32 (`precision.py`),
-so that it is a reference on a GPU too.
+O(H W N): for small test scenes only.
+
+The rasterisation rule, literally: Gaussian i contributes at pixel p iff its Mahalanobis
+distance d_i(p) <= r(o_i) = min(radius_sigma, sqrt(2 ln(o_i / alpha_min))) and its alpha is
+at least alpha_min (the same thing but for rounding at the boundary). Every product runs in
+full float32 (`precision.py`), so that it is a reference on a GPU too.
 """
 
 import functools
@@ -65,11 +69,14 @@ def render_reference(gaussians, camera, *, background=None, settings, features=N
   jj, ii = jnp.meshgrid(jnp.arange(w), jnp.arange(h))
   pix = jnp.stack([jj, ii], axis=-1).reshape(-1, 2).astype(means.dtype) + 0.5  # [P, 2]
   d = pix[:, None, :] - mean2d[order][None, :, :]  # [P, N, 2]
-  maha = jnp.einsum("pni,nij,pnj->pn", d, inv[order], d, precision=MATMUL)
-  alpha = jnp.minimum(s.alpha_max,
-                      gaussians.opacities[order][None, :] * jnp.exp(-0.5 * maha))
-  use = (alive[order][None, :] & (maha <= s.radius_sigma**2) & (alpha >= s.alpha_min)
-         & (gaussians.opacities[order][None, :] >= s.alpha_min))
+  maha = jnp.einsum("pni,nij,pnj->pn", d, inv[order], d, precision=MATMUL)  # d_i(p)^2
+  opacity = gaussians.opacities[order][None, :]
+  alpha = jnp.minimum(s.alpha_max, opacity * jnp.exp(-0.5 * maha))
+  r2 = jnp.full_like(opacity, s.radius_sigma**2)  # r(o)^2
+  if s.alpha_min > 0:
+    r2 = jnp.minimum(r2, 2.0 * jnp.log(jnp.maximum(opacity, 1e-30) / s.alpha_min))
+  use = (alive[order][None, :] & (maha <= r2) & (alpha >= s.alpha_min)
+         & (opacity >= s.alpha_min))
   alpha = jnp.where(use, alpha, 0.0)
   trans_before = jnp.cumprod(
       jnp.concatenate([jnp.ones_like(alpha[:, :1]), 1.0 - alpha[:, :-1]], axis=1), axis=1)

@@ -7,6 +7,16 @@ import dataclasses
 class RenderSettings:
   """Everything about a render that is not a differentiable input.
 
+  The rasterisation rule (as in INRIA 3DGS and gsplat): a Gaussian of opacity o contributes
+  at a pixel p iff its Mahalanobis distance d(p) satisfies
+
+    d(p) <= r(o) = min(radius_sigma, sqrt(2 ln(o / alpha_min))),
+
+  which is exactly where its alpha o exp(-d^2 / 2) is >= alpha_min, up to the cap
+  `radius_sigma`. Its screen footprint, which decides the tiles it is listed in, has the
+  same radius r(o) sqrt(lambda_max) (lambda_max: the largest eigenvalue of its 2D
+  covariance), so the image does not depend on `tile_size`.
+
   Attributes:
     tile_size: side of a square screen tile in pixels.
     alpha_max: per-Gaussian opacity clamp (3DGS: 0.99).
@@ -16,9 +26,10 @@ class RenderSettings:
     near_plane: Gaussians whose centre has camera depth z < near_plane are culled.
     eps2d: isotropic screen-space dilation added to every 2D covariance (pixels^2); a
       low-pass filter that also keeps the 2D covariance invertible.
-    radius_sigma: a Gaussian affects only pixels within this many standard deviations
-      (Mahalanobis distance); its screen bounding box uses the same radius. With this cut
-      the image does not depend on `tile_size`.
+    radius_sigma: cap of the footprint radius r(o) above, in standard deviations. At the
+      default 3.33 = sqrt(2 ln 255) the alpha rule binds for every opacity <= 1, as in
+      gsplat. 3.0 reproduces the images of the renderer before the alpha rule, which cut
+      every Gaussian at 3 sigma.
     max_intersections: budget of (tile, Gaussian) pairs, counted after padding each tile's
       list to a multiple of `chunk_size`. Exceeding it sets `stats.overflow`; see
       `mfsample.render.fit_budget` to grow it. Must be a multiple of
@@ -34,7 +45,7 @@ class RenderSettings:
   transmittance_min: float = 1e-4
   near_plane: float = 0.2
   eps2d: float = 0.3
-  radius_sigma: float = 3.0
+  radius_sigma: float = 3.33
   max_intersections: int = 1 << 16
   chunk_size: int = 32
   chunks_per_step: int = 16

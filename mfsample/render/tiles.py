@@ -1,6 +1,7 @@
 """Stage 2: tile intersection, sorted by tile then depth, laid out in fixed-size chunks.
 
-Every screen-space Gaussian is paired with the tiles its bounding square overlaps. The
+Every screen-space Gaussian is paired with the tiles its bounding square overlaps (the square
+around its footprint, of radius `Projected.radii`: `mfsample.render.projection`). The
 pairs are generated in front-to-back order (Gaussians are depth-sorted first) and stably
 sorted by tile, so each tile's list is depth-ordered. Each tile's list is then padded to a
 multiple of `chunk_size` so that a chunk belongs to exactly one tile: the compositor then
