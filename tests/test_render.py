@@ -333,6 +333,43 @@ def test_screen_offset_moves_the_2d_centres_and_reports_footprints():
   np.testing.assert_array_equal(np.asarray(grad)[~np.asarray(base.visible)], 0.0)
 
 
+@functools.partial(jax.jit, static_argnames=("settings",))
+def _images_and_grads(batch, cam, settings):
+  """(rgb, visible) of each scene of a same-shape batch, and the gradient of its sum."""
+  def one(g):
+    out = render(g, cam, background=BACKGROUND, settings=settings)
+    return jnp.sum(out.rgb) + jnp.sum(out.depth), (out.rgb, out.visible)
+
+  grad_fn = jax.value_and_grad(one, has_aux=True, allow_int=True)
+  (_, images), grads = jax.vmap(grad_fn)(batch)
+  return images, grads
+
+
+def test_non_finite_gaussians_are_culled_and_poison_nothing():
+  """A NaN in a masked-out Gaussian at slot 0 (the slot padding entries point at) and a NaN
+  colour in one visible Gaussian: every pixel stays finite and equals the render without
+  those Gaussians, and their gradients are 0, not NaN."""
+  n, k = 16, 5
+  g = random_gaussians(n, sh_degree=1, seed=8, scale_range=(0.1, 0.4))
+  g = replace(g, mask=jnp.ones(n, bool).at[0].set(False))
+  cam = orbit_camera(16, 16, distance=3.0)
+  poisoned = replace(g, means=g.means.at[0].set(jnp.nan), sh=g.sh.at[0].set(jnp.nan)
+                     .at[k, 0, 1].set(jnp.nan))
+  without = replace(g, mask=g.mask.at[k].set(False))
+  batch = jax.tree.map(lambda *x: jnp.stack(x), g, poisoned, without)
+  (rgb, visible), grads = _images_and_grads(batch, cam, SMALL)
+  rgb, visible = np.asarray(rgb), np.asarray(visible)
+  assert visible[0, k] and not visible[1, k] and not visible[1, 0]
+  assert np.all(np.isfinite(rgb[1]))
+  np.testing.assert_array_equal(rgb[1], rgb[2])
+  assert np.any(rgb[0] != rgb[1])  # Gaussian k did show when it was finite
+  for leaf in jax.tree.leaves(replace(grads, mask=None)):
+    leaf = np.asarray(leaf)[1]
+    assert np.all(np.isfinite(leaf))
+    np.testing.assert_array_equal(leaf[[0, k]], 0.0)
+    assert np.any(leaf != 0.0)
+
+
 def test_masked_gaussians_change_nothing_and_get_no_gradient():
   g, cam = hard_scene(3)
   n, live = g.num_gaussians, g.num_gaussians - 5

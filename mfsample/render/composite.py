@@ -13,6 +13,10 @@ f_i the blended features:
 The tile lists hold each Gaussian in every tile its footprint of radius r(o) sqrt(lambda_max)
 pixels touches (`projection.py`), so every pixel where the rule lets it contribute sees it.
 
+Padding slots of the lists and Gaussians culled before (masked, behind the camera,
+non-finite) contribute exactly nothing: the values gathered into padding slots are zeros,
+whatever the Gaussian slot they point at holds (a NaN included).
+
 Transmittance is accumulated in log space. Within a chunk of C Gaussians the exclusive
 prefix sum of log(1 - alpha) is one small matrix product with a strictly lower-triangular
 matrix; chunks of the same tile are chained within a step by a second such product, and
@@ -68,10 +72,8 @@ def composite(layout: TileLayout, means2d, conics, opacities, features, width, h
   num_steps = settings.max_chunks // steps_g
   dtype = features.dtype
 
-  ids = layout.gaussian_ids
-
   def per_chunk(x):  # [N, ...] -> [S, G, C, ...]
-    return x[ids].reshape((num_steps, steps_g, chunk) + x.shape[1:])
+    return chunk_values(layout, x).reshape((num_steps, steps_g, chunk) + x.shape[1:])
 
   xs = _ChunkInputs(
       means2d=per_chunk(means2d),
@@ -154,6 +156,16 @@ def composite(layout: TileLayout, means2d, conics, opacities, features, width, h
   image = _tiles_to_image(blended[:num_tiles], tiles_x, tiles_y, ts, width, height)
   alpha = _tiles_to_image(coverage[:num_tiles, :, None], tiles_x, tiles_y, ts, width, height)
   return image, alpha[..., 0]
+
+
+def chunk_values(layout: TileLayout, x):
+  """Per-Gaussian values [N, ...] -> per list slot [B, C, ...], exactly 0 on padding.
+
+  Padding slots point at Gaussian 0; a select, not a product with the mask, keeps whatever
+  Gaussian 0 holds (a NaN of a masked-out Gaussian) out of them, and its cotangent is 0.
+  """
+  live = layout.live.reshape(layout.live.shape + (1,) * (x.ndim - 1))
+  return jnp.where(live, x[layout.gaussian_ids], jnp.zeros((), x.dtype))
 
 
 @custom_vmap

@@ -54,6 +54,14 @@ def render(gaussians: Gaussians, camera: Camera, *, background=None,
   outside `jax.jit` is compiled too and is inlined inside one; vmap it over a batched
   `Camera` or a batched `Gaussians` (leading axis on every leaf).
 
+  A Gaussian contributes at a pixel where its alpha is >= `settings.alpha_min`, within
+  `settings.radius_sigma` standard deviations (`RenderSettings` states the rule).
+
+  Robustness: a Gaussian that is masked out, or has any non-finite parameter (mean, scale,
+  quaternion, opacity, SH coefficient, or its row of `features` or `screen_offset`), is
+  culled: it contributes exactly nothing, cannot turn other pixels into NaN, has
+  `visible` False and radius 0, and receives zero gradients (not NaN).
+
   Args:
     gaussians: `Gaussians` with N >= 0 entries (unbatched).
     camera: an unbatched `Camera`.
@@ -92,6 +100,9 @@ def render(gaussians: Gaussians, camera: Camera, *, background=None,
     if screen_offset is not None:
       screen_offset = jnp.zeros((1, 2), dtype)
 
+  finite = _finite_rows(gaussians, features, screen_offset)
+  gaussians, features, screen_offset = _cull_non_finite(finite, gaussians, features,
+                                                        screen_offset)
   proj = project_gaussians(gaussians.means, gaussians.scales, gaussians.quats,
                            gaussians.opacities, gaussians.mask, camera, settings)
   if features is None:
@@ -117,3 +128,41 @@ def render(gaussians: Gaussians, camera: Camera, *, background=None,
   return RenderOutput(rgb=rgb, alpha=alpha, depth=blended[..., num_channels],
                       stats=layout.stats, radii=proj.radii[:n], visible=proj.valid[:n])
 
+
+
+def _finite_rows(gaussians, features, screen_offset):
+  """[N] bool: every parameter of the Gaussian (and its optional rows) is finite."""
+  def rows(x):
+    return jnp.all(jnp.isfinite(x).reshape(x.shape[0], -1), axis=-1)
+
+  arrays = [gaussians.means, gaussians.scales, gaussians.quats, gaussians.opacities,
+            gaussians.sh]
+  arrays += [x for x in (features, screen_offset) if x is not None]
+  return functools.reduce(jnp.logical_and, [rows(x) for x in arrays])
+
+
+def _cull_non_finite(finite, gaussians, features, screen_offset):
+  """Replaces non-finite rows by a masked placeholder Gaussian (before any arithmetic).
+
+  A select on the inputs, not a mask applied later: downstream arithmetic never sees the
+  non-finite values, so nothing computes NaN * 0, and the cotangent of a replaced row is 0.
+  """
+  placeholder = Gaussians.empty(1, gaussians.sh_degree, gaussians.means.dtype)
+
+  def clean(x, safe):
+    keep = finite.reshape((-1,) + (1,) * (x.ndim - 1))
+    return jnp.where(keep, x, safe.astype(x.dtype))
+
+  mask = finite if gaussians.mask is None else gaussians.mask & finite
+  gaussians = Gaussians(
+      means=clean(gaussians.means, placeholder.means),
+      scales=clean(gaussians.scales, placeholder.scales),
+      quats=clean(gaussians.quats, placeholder.quats),
+      opacities=clean(gaussians.opacities, placeholder.opacities),
+      sh=clean(gaussians.sh, placeholder.sh),
+      mask=mask)
+  if features is not None:
+    features = clean(features, jnp.zeros((), features.dtype))
+  if screen_offset is not None:
+    screen_offset = clean(screen_offset, jnp.zeros((), screen_offset.dtype))
+  return gaussians, features, screen_offset
