@@ -1,4 +1,4 @@
-"""Scenes and checks shared by the renderer tests.
+"""Scenes and checks shared by the renderer tests (`test_render.py`, `test_composite_pallas.py`).
 
 Functions are jitted here, at module level, with their settings static: tests that use equal
 settings share one compilation.

@@ -345,7 +345,8 @@ def _images_and_grads(batch, cam, settings):
   return images, grads
 
 
-def test_non_finite_gaussians_are_culled_and_poison_nothing():
+@pytest.mark.parametrize("compositor", ["jnp", pytest.param("pallas", marks=pytest.mark.slow)])
+def test_non_finite_gaussians_are_culled_and_poison_nothing(compositor):
   """A NaN in a masked-out Gaussian at slot 0 (the slot padding entries point at) and a NaN
   colour in one visible Gaussian: every pixel stays finite and equals the render without
   those Gaussians, and their gradients are 0, not NaN."""
@@ -357,7 +358,7 @@ def test_non_finite_gaussians_are_culled_and_poison_nothing():
                      .at[k, 0, 1].set(jnp.nan))
   without = replace(g, mask=g.mask.at[k].set(False))
   batch = jax.tree.map(lambda *x: jnp.stack(x), g, poisoned, without)
-  (rgb, visible), grads = _images_and_grads(batch, cam, SMALL)
+  (rgb, visible), grads = _images_and_grads(batch, cam, SMALL.replace(compositor=compositor))
   rgb, visible = np.asarray(rgb), np.asarray(visible)
   assert visible[0, k] and not visible[1, k] and not visible[1, 0]
   assert np.all(np.isfinite(rgb[1]))

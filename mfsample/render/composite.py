@@ -153,8 +153,8 @@ def composite(layout: TileLayout, means2d, conics, opacities, features, width, h
                                 num_segments=num_tiles + 1, indices_are_sorted=True)
   coverage = jax.ops.segment_sum(coverage.reshape(-1, p), chunk_tile,
                                  num_segments=num_tiles + 1, indices_are_sorted=True)
-  image = _tiles_to_image(blended[:num_tiles], tiles_x, tiles_y, ts, width, height)
-  alpha = _tiles_to_image(coverage[:num_tiles, :, None], tiles_x, tiles_y, ts, width, height)
+  image = tiles_to_image(blended[:num_tiles], tiles_x, tiles_y, ts, width, height)
+  alpha = tiles_to_image(coverage[:num_tiles, :, None], tiles_x, tiles_y, ts, width, height)
   return image, alpha[..., 0]
 
 
@@ -184,7 +184,7 @@ def _max_over_batch_rule(axis_size, in_batched, n):
   return jnp.max(n), False
 
 
-def _tiles_to_image(tiles, tiles_x, tiles_y, ts, width, height):
+def tiles_to_image(tiles, tiles_x, tiles_y, ts, width, height):
   """[T, ts*ts, F] per-tile pixels -> [H, W, F]."""
   f = tiles.shape[-1]
   img = tiles.reshape(tiles_y, tiles_x, ts, ts, f).transpose(0, 2, 1, 3, 4)

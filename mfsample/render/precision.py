@@ -8,7 +8,7 @@ transmittance by ~1%. The CPU, which computes float32 products in full precision
 the setting, would then disagree with the GPU by far more than rounding. Every product in
 `mfsample.render` therefore passes this precision explicitly. The products are small (3x3
 rotations, chunk-sized prefix sums), so full float32 costs little on a GPU, and nothing on
-a CPU.
+a CPU. Pallas kernels need no setting: the compositing kernel has no matrix product.
 """
 
 import jax

@@ -11,6 +11,7 @@ from mfsample.camera import Camera
 from mfsample.gaussians import Gaussians
 from mfsample.render import sh as sh_lib
 from mfsample.render.composite import composite
+from mfsample.render.composite_pallas import composite_pallas
 from mfsample.render.projection import project_gaussians, view_directions
 from mfsample.render.settings import RenderSettings
 from mfsample.render.tiles import TileStats, intersect_tiles
@@ -122,8 +123,9 @@ def render(gaussians: Gaussians, camera: Camera, *, background=None,
   layout = intersect_tiles(proj, camera.width, camera.height, settings)
   blend_in = jnp.concatenate([colors, proj.depths[:, None]], axis=-1)
   opacities = jnp.where(proj.valid, gaussians.opacities, 0.0)
-  blended, alpha = composite(layout, means2d, proj.conics, opacities, blend_in,
-                             camera.width, camera.height, settings)
+  composite_fn = composite_pallas if settings.compositor == "pallas" else composite
+  blended, alpha = composite_fn(layout, means2d, proj.conics, opacities, blend_in,
+                                camera.width, camera.height, settings)
   rgb = blended[..., :num_channels] + (1.0 - alpha)[..., None] * background
   return RenderOutput(rgb=rgb, alpha=alpha, depth=blended[..., num_channels],
                       stats=layout.stats, radii=proj.radii[:n], visible=proj.valid[:n])

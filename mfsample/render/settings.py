@@ -2,6 +2,7 @@
 
 import dataclasses
 
+COMPOSITORS = ("jnp", "pallas")
 SEARCHSORTED_METHODS = ("scan", "scan_unrolled", "sort", "compare_all")
 
 
@@ -37,8 +38,12 @@ class RenderSettings:
       `mfsample.render.fit_budget` to grow it. Must be a multiple of
       chunk_size * chunks_per_step.
     chunk_size: Gaussians composited together in one dense block (per tile).
-    chunks_per_step: chunks processed per step of the compositing loop; the backward pass
-      keeps the activations of one step only, so this bounds memory.
+    chunks_per_step: chunks processed per step of the jnp compositor's loop; the backward
+      pass keeps the activations of one step only, so this bounds memory. A speed knob:
+      results agree to float rounding for any value.
+    compositor: "jnp" (default; the pure jax.numpy compositor, `composite.py`) or "pallas"
+      (a Pallas kernel, one program per tile, `composite_pallas.py`; meant for GPUs, run by
+      the Pallas interpreter on a CPU). Its tile_size and chunk_size must be powers of two.
     searchsorted_method: `jnp.searchsorted`'s method in the tile intersection ("scan",
       "scan_unrolled", "sort", "compare_all"); a speed knob with identical results.
   """
@@ -53,6 +58,7 @@ class RenderSettings:
   max_intersections: int = 1 << 16
   chunk_size: int = 32
   chunks_per_step: int = 16
+  compositor: str = "jnp"
   searchsorted_method: str = "scan"
 
   def __post_init__(self):
@@ -73,6 +79,14 @@ class RenderSettings:
       raise ValueError(
           f"max_intersections ({self.max_intersections}) must be a positive multiple of "
           f"chunk_size * chunks_per_step ({step}).")
+    if self.compositor not in COMPOSITORS:
+      raise ValueError(f"compositor must be one of {COMPOSITORS}, got {self.compositor!r}")
+    if self.compositor == "pallas" and not (_is_power_of_two(self.tile_size)
+                                            and _is_power_of_two(self.chunk_size)):
+      # The kernel works on [tile_size^2, chunk_size] blocks; GPU kernel languages (Triton)
+      # need block sides that are powers of two.
+      raise ValueError("the pallas compositor needs tile_size and chunk_size to be powers "
+                       f"of two, got {self.tile_size} and {self.chunk_size}")
     if self.searchsorted_method not in SEARCHSORTED_METHODS:
       raise ValueError(f"searchsorted_method must be one of {SEARCHSORTED_METHODS}, got "
                        f"{self.searchsorted_method!r}")
@@ -97,3 +111,7 @@ class RenderSettings:
 
   def replace(self, **changes):
     return dataclasses.replace(self, **changes)
+
+
+def _is_power_of_two(n):
+  return n >= 1 and n & (n - 1) == 0
