@@ -21,6 +21,7 @@ camera: the share of the step spent outside the renderer. --trace_dir writes a J
 trace (TensorBoard / Perfetto) of a few calls of each variant, for a per-kernel profile.
 
   python benchmarks/render.py --quick --radius_sigma=3.0,3.33      # the old and the new rule
+  python benchmarks/render.py --quick --radius_sigma=3.0,3.33 --clock=process  # shared CPU
   python benchmarks/render.py --cells=50000x400 --compositor=jnp,pallas
   python benchmarks/render.py --cells=50000x400 --chunks_per_step=16,64,256,1024
   python benchmarks/render.py --cells=50000x400 --searchsorted=scan,sort,compare_all
@@ -62,6 +63,11 @@ _CHUNK_SIZE = flags.DEFINE_list("chunk_size", ["32"], "RenderSettings.chunk_size
 _SEARCHSORTED = flags.DEFINE_list("searchsorted", ["scan"],
                                   "RenderSettings.searchsorted_method values.")
 _DENSE = flags.DEFINE_bool("dense", True, "Time the dense reference on small cells.")
+_CLOCK = flags.DEFINE_enum(
+    "clock", "wall", ["wall", "process"],
+    "wall: elapsed time (latency). process: CPU time of the benchmark process, all its threads "
+    "(the work done; steadier than wall time on a machine shared with other jobs, and not a "
+    "latency; meaningless for a GPU, whose work is not the process's CPU time).")
 _STEP = flags.DEFINE_bool("step", False, "Time a whole training step and its renderer.")
 _STEP_SIZE = flags.DEFINE_integer("step_size", 400, "--step: image side (lego 800 / 2^k).")
 _STEP_POINTS = flags.DEFINE_integer("step_points", 100_000, "--step: initial points.")
@@ -91,12 +97,13 @@ def _label(variant):
 def _median_ms(fn, repeats):
   import jax
 
+  clock = time.process_time if _CLOCK.value == "process" else time.perf_counter
   jax.block_until_ready(fn())  # warm-up (compilation happened before)
   times = []
   for _ in range(repeats):
-    start = time.perf_counter()
+    start = clock()
     jax.block_until_ready(fn())
-    times.append(time.perf_counter() - start)
+    times.append(clock() - start)
   return 1e3 * statistics.median(times)
 
 
@@ -345,7 +352,8 @@ def main(argv):
            else _CELLS.value or (QUICK_CELLS if _QUICK.value else FULL_CELLS))
   variants = _variants()
   env = dict(os.environ, PYTHONPATH=os.pathsep.join([".", os.environ.get("PYTHONPATH", "")]))
-  passthrough = [f"--repeats={_REPEATS.value}", f"--step_size={_STEP_SIZE.value}",
+  passthrough = [f"--repeats={_REPEATS.value}", f"--clock={_CLOCK.value}",
+                 f"--step_size={_STEP_SIZE.value}",
                  f"--step_points={_STEP_POINTS.value}", f"--data={_DATA.value}"]
   if _TRACE.value:
     passthrough.append(f"--trace_dir={_TRACE.value}")
@@ -373,7 +381,7 @@ def main(argv):
 
   rows = _summarise(rounds, variants)
   summary = {"machine": machine, "variants": variants, "rounds": _ROUNDS.value,
-             "cells": rows}
+             "clock": _CLOCK.value, "cells": rows}
   # Time against intersections for the first variant, over the cells.
   fitted = [r for r in rows if r["variant"] == variants[0] and r["cell"] != STEP_CELL]
   if len(fitted) >= 3:
@@ -381,8 +389,8 @@ def main(argv):
     summary["fit_forward_backward"] = _linear_fit(fitted, "forward_backward_ms")
   print()
   print(f"{machine['device_kind']} ({machine['backend']}), jax {machine['jax']}; "
-        f"{_ROUNDS.value} round(s); 'x first': time / the cell's first variant's time, "
-        "median of the per-round ratios")
+        f"{_CLOCK.value} clock; {_ROUNDS.value} round(s); 'x first': time / the cell's first "
+        "variant's time, median of the per-round ratios")
   print(_table(rows, machine))
   for key in ("fit_forward", "fit_forward_backward"):
     if key in summary:
