@@ -13,8 +13,11 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 from render_testlib import (
+  BACKGROUND,
   EXTREME_SETTINGS,
+  HEIGHT,
   SMALL,
+  WIDTH,
   assert_finite,
   assert_grads_close,
   batched_values_and_grads,
@@ -77,16 +80,17 @@ def test_matches_jnp_at_extremes_vmapped_over_scenes():
 
 
 @functools.partial(jax.jit, static_argnames=("settings",))
-def _images_and_grads_over_cameras(gaussians, cameras, *, settings):
-  """Images [B, H, W, 5] of one model vmapped over cameras, and the gradient of a loss of
-  them w.r.t. the Gaussians and every camera."""
-  def image(g, cam):
-    out = render(g, cam, settings=settings)
-    return jnp.concatenate([out.rgb, out.alpha[..., None], out.depth[..., None]], axis=-1)
+def _render_and_grads_over_cameras(gaussians, cameras, weights, *, settings):
+  """`render_and_grads` vmapped over cameras: outputs per camera, and the gradients of the
+  sum of the cameras' losses (w.r.t. the Gaussians, and each camera)."""
+  def outputs(g, cam):
+    out = render(g, cam, background=BACKGROUND, settings=settings)
+    return out.rgb, out.alpha, out.depth
 
   def loss(g, cams):
-    images = jax.vmap(image, in_axes=(None, 0))(g, cams)
-    return jnp.sum(images ** 2), images
+    rgb, alpha, depth = jax.vmap(outputs, in_axes=(None, 0))(g, cams)
+    return (jnp.sum(weights[..., :3] * rgb) + jnp.sum(weights[..., 3] * alpha)
+            + 0.1 * jnp.sum(weights[..., 4] * depth)), (rgb, alpha, depth)
 
   (_, images), grads = jax.value_and_grad(loss, argnums=(0, 1), has_aux=True)(
       gaussians, cameras)
@@ -95,15 +99,24 @@ def _images_and_grads_over_cameras(gaussians, cameras, *, settings):
 
 @pytest.mark.slow
 def test_matches_jnp_under_vmap_over_cameras():
-  """(vmap over samples of the Gaussians: the extremes above.)"""
-  g = random_gaussians(24, sh_degree=1, seed=3, scale_range=(0.05, 0.3))
-  cams = jax.tree.map(lambda *x: jnp.stack(x), orbit_camera(20, 16, azimuth=0.2),
-                      orbit_camera(20, 16, azimuth=1.4))
-  want, grads_want = _images_and_grads_over_cameras(g, cams, settings=SMALL)
-  got, grads_got = _images_and_grads_over_cameras(g, cams, settings=pallas(SMALL))
-  assert float(jnp.min(jnp.max(want[..., 3], axis=(1, 2)))) > 0.5  # both images covered
-  np.testing.assert_allclose(got, want, atol=IMAGE_ATOL)
-  assert_grads_close(grads_got, grads_want, rtol=GRAD_RTOL)
+  """The kernel vmapped over two cameras against the jnp compositor camera by camera (vmap
+  over samples of the Gaussians: the extremes above)."""
+  gaussians, cam = hard_scene(3)
+  other = orbit_camera(WIDTH, HEIGHT, azimuth=2.0, elevation=0.5, distance=2.8, fov_x=1.1)
+  cams = jax.tree.map(lambda *x: jnp.stack(x), cam, other)
+  weights = loss_weights()
+  got, (grads_gaussians, grads_cams) = _render_and_grads_over_cameras(
+      gaussians, cams, weights, settings=pallas(SMALL))
+  grads_want = []
+  for i, c in enumerate((cam, other)):
+    want, grads = render_and_grads(gaussians, c, weights, settings=SMALL)
+    assert float(jnp.max(want[1])) > 0.5  # the scene covers the image
+    for g, w in zip(got, want, strict=True):
+      np.testing.assert_allclose(g[i], w, atol=IMAGE_ATOL)
+    assert_grads_close(jax.tree.map(lambda x, i=i: x[i], grads_cams), grads[1],
+                       rtol=GRAD_RTOL)
+    grads_want.append(grads[0])
+  assert_grads_close(grads_gaussians, jax.tree.map(jnp.add, *grads_want), rtol=GRAD_RTOL)
 
 
 def test_an_overflowing_budget_composites_the_same_truncated_lists():

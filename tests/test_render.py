@@ -51,9 +51,8 @@ def test_tiled_matches_dense_reference(sh_degree, settings):
 
 def test_image_does_not_depend_on_tile_size():
   gaussians, cam = hard_scene(3, seed=5)
-  outs = [render(gaussians, cam, settings=SMALL.replace(tile_size=t)) for t in (4, 8, 16)]
-  for out in outs[:2]:
-    np.testing.assert_allclose(out.rgb, outs[2].rgb, atol=2e-5)
+  outs = [render(gaussians, cam, settings=SMALL.replace(tile_size=t)) for t in (8, 16)]
+  np.testing.assert_allclose(outs[0].rgb, outs[1].rgb, atol=2e-5)
 
 
 # ------------------------------------------------------------------ the rasterisation rule
