@@ -279,6 +279,15 @@ def evaluate_model(model, views: Views, *, background, settings, lpips_fn=None):
   return out, settings
 
 
+def scoring_start(config):
+  """Starting settings of the strategies' renders (scores, ascents): the round models'
+  renderer (`round_train.render`: footprint rule, compositor) with a small budget, grown
+  on overflow."""
+  from mfsample.train.loop import render_settings
+
+  return render_settings(config.round_train.render).holding_budget(1 << 12)
+
+
 def choose_next(strategy, pool: Pool, config, seed, trainer: Trainer, budgets, selected,
                 available):
   """One round of a strategy: its choice of the next view after the views `selected`.
@@ -305,7 +314,8 @@ def choose_next(strategy, pool: Pool, config, seed, trainer: Trainer, budgets, s
   inputs = strategies.Inputs(
       model=model, train_cameras=stack_cameras([s.camera for s in selected]),
       candidates=pool.candidates.cameras, available=available, sphere=pool.sphere,
-      bounds=pool.bounds, background=pool.background, settings=dict(budgets),
+      bounds=pool.bounds, background=pool.background,
+      settings={"start": scoring_start(config), **budgets},
       max_views=int(config.max_views))
   key = jax.random.fold_in(jax.random.PRNGKey(int(seed)), strategies.NAMES.index(
       strategy.name) if strategy.name in strategies.NAMES else 99)
@@ -534,7 +544,7 @@ def landscape(config, pool: Pool, trainer: Trainer, budgets):
     strategy = strategies.make_strategy("ours_opt_rnd", config)
     inputs = strategies.Inputs(model, stack_cameras([sel[0].camera]), cands.cameras,
                                np.ones(len(cands), bool), pool.sphere, pool.bounds,
-                               pool.background, dict(budgets))
+                               pool.background, {"start": scoring_start(config), **budgets})
     key = jax.random.fold_in(jax.random.PRNGKey(seed), 1234)
     choice = strategy.select(inputs, key)
     out["trajectory"] = choice.info["trajectory"]

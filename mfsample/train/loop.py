@@ -72,7 +72,7 @@ def sampler_spec(config, extent, sh_degree):
 
 # Training-config fields that change only how fast a run goes, never what it computes
 # (beyond float rounding): a resumed run or a reused result may differ in them.
-SPEED_ONLY_FIELDS = ("render.chunks_per_step",)
+SPEED_ONLY_FIELDS = ("render.chunks_per_step", "render.compositor")
 
 
 def without_speed_only_fields(train_config_dict):
@@ -98,9 +98,11 @@ def render_settings(render_config):
   (chunk_size x chunks_per_step), so any `chunks_per_step` is valid with any start.
   """
   chunks_per_step = int(render_config.get("chunks_per_step", RenderSettings.chunks_per_step))
-  return RenderSettings.holding(render_config.max_intersections,
-                                tile_size=int(render_config.tile_size),
-                                chunks_per_step=chunks_per_step)
+  return RenderSettings.holding(
+      render_config.max_intersections, tile_size=int(render_config.tile_size),
+      chunks_per_step=chunks_per_step,
+      radius_sigma=float(render_config.get("radius_sigma", RenderSettings.radius_sigma)),
+      compositor=str(render_config.get("compositor", RenderSettings.compositor)))
 
 
 def make_setup(config, train_views, *, extent=None, key=None):
