@@ -7,14 +7,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from planning_testlib import random_model, tiny_pool
+from planning_testlib import poses, random_model
 
 from configs import uncertainty_quality
 from mfsample import config_checks
 from mfsample import uncertainty as unc
 from mfsample.planning import training
 from mfsample.quality import arc, benchmark, maps, run_uncertainty_quality, runner, tables
-from mfsample.renderer import RenderSettings
+from mfsample.renderer import RenderSettings, render
 
 
 def test_arc_cameras_face_the_target_and_split_odd_from_even():
@@ -50,20 +50,21 @@ def test_depth_error_counts_covered_pixels_only():
 @pytest.mark.slow
 def test_sample_maps_match_the_uncertainty_module():
   # Ours' colour map is Eq. 10's per-pixel term (`uncertainty.uncertainty`); the depth map is
-  # the variance of the samples' expected depths.
+  # the variance of the samples' expected depths. (Model, camera and settings as in
+  # tests/test_uncertainty.py, whose compilations these calls share.)
   model = random_model("lowrank")
-  camera = tiny_pool().candidates.cameras[0]
-  z = unc.uncertainty_z(model, 4, seed=3)
+  camera = poses.spherical_camera(np.array([0.15, 0.3], np.float32),
+                                  poses.SphereSpec(radius=3.0, v_range=(0.05, 0.95), width=20,
+                                                   height=16))
+  z = unc.uncertainty_z(model, 2)
   s = RenderSettings(max_intersections=1 << 12)
-  bg = jnp.zeros(3)
-  out = maps.sample_maps(model, camera, z, bg, settings=s)
-  ref = unc.uncertainty(model, camera, z, settings=s, background=bg)
+  out = maps.sample_maps(model, camera, z, jnp.zeros(3), settings=s)
+  ref = unc.uncertainty(model, camera, z, settings=s)
   assert not bool(jnp.any(out.stats.overflow)) and float(jnp.max(out.colour)) > 0
   np.testing.assert_allclose(out.colour, ref.pixel_map, rtol=1e-5, atol=1e-9)
-  from mfsample.renderer import render
-  depths = [render(g, camera, background=bg, settings=s).expected_depth()
-            for g in (jax.tree.map(lambda x, i=i: x[i], unc.sample_gaussians(model, z))
-                      for i in range(4))]
+  g = unc.sample_gaussians(model, z)
+  depths = [render(jax.tree.map(lambda x, i=i: x[i], g), camera, settings=s).expected_depth()
+            for i in (0, 1)]
   np.testing.assert_allclose(out.depth, np.var(np.stack(depths), axis=0), rtol=1e-4,
                              atol=1e-7)
 
@@ -85,6 +86,7 @@ def test_sampler_flags_and_labels():
     ("ause.samplers", ("lowrank:2", "full"), "config.ause.samplers: sampler 'full'"),
     ("data.arc.num_views", 8, "config.data.arc.num_views = 8: must be odd"),
     ("ause.samples", 1, "config.ause.samples = 1: must be an integer >= 2"),
+    ("data.spp", 10, "config.data.spp = 10: must be a perfect square"),
     ("train.densify.start", 10, "config.train.densify.start = 10"),
     ("figures.test_view", 4, r"config.figures.test_view = 4: must be an integer in \[0, 3\]"),
 ])
@@ -123,11 +125,11 @@ def test_tiny_experiment_writes_both_parts(tiny_run):
     assert np.all(f["map_colour"] >= 0) and np.any(f["mask"])
   assert (workdir / "uncertainty_quality_synthetic.png").stat().st_size > 0
   cand = results["candidates"]
-  assert [(r["samples"], len(r["per_case_rho_u_error"])) for r in cand["rows"]] == [(2, 2),
-                                                                                      (4, 2)]
+  assert [(r["samples"], len(r["per_case_rho_u_error"])) for r in cand["rows"]] == [(8, 2),
+                                                                                      (2, 2)]
   assert all(-1.0 <= r["rho_u_error"] <= 1.0 for r in cand["rows"])
   (paired,) = cand["paired"]
-  assert paired["minus"] == {"samples": 2} and paired["cases"] == 2
+  assert paired["minus"] == {"samples": 8} and paired["cases"] == 2
   table = (workdir / "table.md").read_text()
   assert "| Ours, rank 2: U (Eq. 10) |" in table and "| FisherRF |" in table
   assert "rho(U, error)" in table

@@ -8,6 +8,7 @@ were made with another protocol is refused before anything is written, naming th
 """
 
 import json
+import math
 import os
 import time
 
@@ -52,6 +53,10 @@ def check_config(config):
     checks.check_int(config, "ause.z_seed", minimum=0)
     checks.check_int(config, "data.width", minimum=1)
     checks.check_int(config, "data.height", minimum=1)
+    spp = checks.check_int(config, "data.spp", minimum=1)
+    if math.isqrt(spp) ** 2 != spp:
+      raise checks.ConfigError(f"config.data.spp = {spp}: must be a perfect square (the "
+                               "stratified sampler's grid)")
     views = checks.check_int(config, "data.arc.num_views", minimum=3)
     if views % 2 == 0:
       raise checks.ConfigError(f"config.data.arc.num_views = {views}: must be odd (the "
