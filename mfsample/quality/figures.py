@@ -4,9 +4,11 @@ Rows: the ground truth (image, exact depth), then one row per model: its mean re
 depth error (grey where it does not count) and its maps (Ours: colour U and depth variance;
 the deterministic model: FisherRF and ActiveNeRF). A map is shown by its rank among the
 counted pixels (0 = least, 1 = most uncertain), since AUSE sees only the order; the panel
-title gives its AUSE on this view.
+title gives its AUSE on this view. The PNG is stored with a 256-colour palette (Pillow, which
+matplotlib depends on): a third of the size, for the docs.
 """
 
+import io
 import os
 
 import numpy as np
@@ -61,6 +63,8 @@ def scene_figure(scene, test_views, records, workdir, path, view=0, seed=None):
       spine.set_visible(False)
   cmap = plt.get_cmap("viridis").copy()
   cmap.set_bad("0.75")
+  err_cmap = plt.get_cmap("magma").copy()
+  err_cmap.set_bad("0.75")
   true_depth = np.where(test_views.alphas[view] > 0, test_views.depths[view], np.nan)
   axes[0, 0].imshow(test_views.images[view], interpolation="nearest")
   axes[0, 0].set_title("test view", fontsize=7)
@@ -78,7 +82,7 @@ def scene_figure(scene, test_views, records, workdir, path, view=0, seed=None):
     mask = arrays["mask"][view]
     axes[row, 0].imshow(arrays["render"][view], interpolation="nearest")
     axes[row, 0].set_ylabel(model_label(r["model"]), fontsize=7)
-    axes[row, 1].imshow(np.where(mask, arrays["depth_error"][view], np.nan), cmap="magma",
+    axes[row, 1].imshow(np.where(mask, arrays["depth_error"][view], np.nan), cmap=err_cmap,
                         vmin=0.0, vmax=err_max or 1.0, interpolation="nearest")
     axes[row, 1].set_title(f"depth error (MAE {r['views'][view]['depth_mae'] or 0:.3f})",
                            fontsize=7)
@@ -92,6 +96,12 @@ def scene_figure(scene, test_views, records, workdir, path, view=0, seed=None):
   fig.suptitle(f"{scene}: test view {view}; maps as ranks (grey: not counted)", fontsize=8)
   fig.tight_layout()
   os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
-  fig.savefig(path, dpi=80)
+  buffer = io.BytesIO()
+  fig.savefig(buffer, format="png", dpi=80)
   plt.close(fig)
+  from PIL import Image
+
+  buffer.seek(0)
+  Image.open(buffer).convert("RGB").quantize(256, method=Image.Quantize.FASTOCTREE).save(
+      path, optimize=True)
   return path
