@@ -7,14 +7,13 @@ are loaded, not recomputed, by a later call with the same config; a workdir whos
 were made with another protocol is refused before anything is written, naming the fields.
 """
 
-import json
 import math
 import os
 import time
 
 from mfsample import config_checks as checks
-from mfsample._json import without_fields, write_json
-from mfsample.planning.workdirs import differences
+from mfsample import workdir as workdir_lib
+from mfsample._json import write_json, write_text
 from mfsample.quality import benchmark, candidates, figures, tables
 from mfsample.train.loop import SPEED_ONLY_FIELDS
 
@@ -104,24 +103,18 @@ def _check_samplers(config, field, min_length):
       raise checks.ConfigError(f"config.{field}: {e}") from None
 
 
-def comparable_config(config_dict):
-  """A config as a JSON dict, less the fields a resumed call may change."""
-  return without_fields(config_dict, RESUME_FREE_FIELDS)
-
-
 def check_resumable(config, workdir):
-  """Refuses to add to a workdir whose finished units were made with another protocol."""
-  path = os.path.join(workdir, "config.json")
+  """Refuses to add to a workdir whose finished units were made with another protocol.
+
+  Raises:
+    mfsample.workdir.WorkdirError: naming the differing fields.
+  """
   units = [os.path.join(workdir, d) for d in ("ause", "candidates")]
-  if not os.path.exists(path) or not any(os.path.isdir(u) and os.listdir(u) for u in units):
-    return
-  with open(path) as f:
-    old = comparable_config(json.load(f))
-  new = comparable_config(json.loads(config.to_json_best_effort()))
-  if old != new:
-    raise ValueError(f"{workdir} holds results made with a different config (differences: "
-                     f"{', '.join(differences(old, new))}); use a new --workdir, or remove "
-                     f"{workdir}/ause and {workdir}/candidates to redo them.")
+  workdir_lib.check_same_config(
+      config, workdir, free_fields=RESUME_FREE_FIELDS,
+      has_results=any(os.path.isdir(u) and os.listdir(u) for u in units),
+      remedy=f"use a new --workdir, or remove {workdir}/ause and {workdir}/candidates to "
+             "redo them")
 
 
 def run_uncertainty_quality(config, workdir):
@@ -137,8 +130,7 @@ def run_uncertainty_quality(config, workdir):
   check_config(config)
   check_resumable(config, workdir)
   os.makedirs(workdir, exist_ok=True)
-  with open(os.path.join(workdir, "config.json"), "w") as f:
-    f.write(config.to_json_best_effort(indent=2))
+  workdir_lib.write_config(config, workdir)
   results, markdown = {}, []
   if config.ause.enabled:
     a = config.ause
@@ -171,8 +163,7 @@ def run_uncertainty_quality(config, workdir):
     markdown.append(tables.candidates_markdown(
         results["candidates"], f"## U against the round model's error at the candidates "
         f"(`{results['candidates']['scene']}`)"))
-  with open(os.path.join(workdir, "table.md"), "w") as f:
-    f.write("\n".join(markdown))
+  write_text(os.path.join(workdir, "table.md"), "\n".join(markdown))
   results["seconds_this_call"] = time.perf_counter() - t0
   write_json(os.path.join(workdir, "results.json"), results, indent=1)
   return results
