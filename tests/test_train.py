@@ -356,3 +356,12 @@ def test_saved_images_flatten_path_like_view_names(tiny_dataset, tmp_path):
   written = sorted(p.name for p in tmp_path.iterdir())
   assert "test_r_0_render.png" in written and "test_r_1_uncertainty.png" in written
   assert "uncertainty.npy" in written
+
+
+def test_saving_no_images_writes_nothing(tiny_dataset, tmp_path):
+  """eval.save_images = 0 asks for no images: no folder, no error."""
+  views = tiny_dataset.test.subset([0, 1])
+  images = np.asarray(views.images)
+  result = eval_lib.EvalResult({}, {}, images, np.ones(images.shape[:3], np.float32))
+  eval_lib.save_images(str(tmp_path / "images"), result, views, num=0)
+  assert not (tmp_path / "images").exists()

@@ -88,8 +88,10 @@ def save_images(directory, result: EvalResult, views, num=None):
     with atomic_path(os.path.join(directory, name)) as tmp:
       iio.imwrite(tmp, image)
 
-  os.makedirs(directory, exist_ok=True)
   num = len(views) if num is None else min(num, len(views))
+  if num <= 0:
+    return  # eval.save_images = 0: no images wanted
+  os.makedirs(directory, exist_ok=True)
   to8 = lambda x: (np.clip(np.asarray(x), 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
   names = views.names or tuple(f"view_{i:03d}" for i in range(len(views)))
   # NeRF Synthetic names are paths ("./test/r_0"): one flat file name per view.
