@@ -31,7 +31,7 @@ def test_relative_paths_resolve_against_the_working_directory(tmp_path, monkeypa
 
 def test_unknown_kind_is_an_error():
   config = tiny_config()
-  config.data.kind = "llff"
+  config.data.kind = "nerf"
   with pytest.raises(ValueError, match="config.data.kind"):
     data_lib.load_dataset(config.data)
 

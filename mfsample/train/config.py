@@ -20,10 +20,17 @@ def default_config():
 
   # ----------------------------------------------------------------- data
   config.data = data = ml_collections.ConfigDict()  # Which views to train and test on.
-  data.kind = "scene"  # "synthetic" (random Gaussians), "blender" (NeRF Synthetic), "scene".
-  data.path = "data/nerf_synthetic/lego"  # blender: scene folder (relative: to the cwd).
-  data.downscale = 1  # blender: integer image downscale factor (lego files are 400x400).
+  # "synthetic" (random Gaussians), "blender" (NeRF Synthetic), "scene" (Mitsuba), "colmap"
+  # (a COLMAP capture: mfsample.data.load_colmap) or "llff" (mfsample.data.load_llff).
+  data.kind = "scene"
+  data.path = "data/nerf_synthetic/lego"  # blender, colmap, llff: scene folder (relative: cwd).
+  # blender: integer image downscale factor (lego files are 400x400); colmap, llff: read the
+  # pre-downscaled images_{downscale}/ folder (1: images/).
+  data.downscale = 1
   data.test_every = 1  # blender: evaluate every n-th test view (1: all 200).
+  # colmap, llff: every n-th image (by name, from the first) is a test view, the others train
+  # (the Mip-NeRF 360 / 3DGS split: 8).
+  data.holdout_every = 8
   data.scene = "default"  # scene: name for mfsample.scenes.get_scene.
   data.width = 128  # scene: image width in pixels.
   data.height = 128  # scene: image height in pixels.
@@ -53,6 +60,11 @@ def default_config():
   # image has 39x fewer pixels, and ~5k points already give several per pixel footprint.
   model.init_points = 5_000
   model.init_opacity = 0.1  # Initial opacity of every Gaussian.
+  # Where the Gaussians start (mfsample.train.initial): "random" (init_points in the scene
+  # box), "points" (the dataset's SfM points and colours: data.kind "colmap") or "ply" (the
+  # Gaussians of a trained 3DGS model, model.ply_path; model.sh_degree must match it).
+  model.init_from = "random"
+  model.ply_path = ""  # init_from "ply": a 3DGS point_cloud.ply (relative: to the cwd).
   model.max_gaussians = 40_000  # Densification never exceeds this many live Gaussians.
 
   # ----------------------------------------------------------------- sampler (B_hat)
@@ -117,7 +129,7 @@ def default_config():
   # ... or (if > 0) wider than this many pixels on screen. 3DGS passes 20 px, but resets the
   # radii it compares right before, so in effect it never prunes by screen size; 0 = off.
   densify.max_screen_size = 0.0
-  densify.sh_degree_every = 1000  # The active SH degree rises by one this often.
+  densify.sh_degree_every = 1000  # The active SH degree rises by one this often (0: all at once).
 
   # ----------------------------------------------------------------- render budget
   config.render = render = ml_collections.ConfigDict()  # Static renderer settings.
