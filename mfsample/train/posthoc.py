@@ -1,0 +1,80 @@
+"""Post-hoc uncertainty for a pretrained 3DGS model: fit B_hat with the mean frozen.
+
+A model trained elsewhere (the 3DGS reference code, gsplat, nerfstudio: a `point_cloud.ply`)
+becomes a stochastic field theta(z) = mean + B_hat z (paper Eq. 7) whose mean is the model
+exactly as stored, by minimising the paper's loss (Eq. 9)
+
+  L(B_hat) = (1 - w) L1 + w (1 - SSIM) of a sample theta(z), z ~ Sobol in [-1, 1]^k,
+             - lambda ||B_hat||_1 on every `loss.volume_every`-th step,
+
+over B_hat alone, on the model's training images. The mean's gradient is stopped
+(`StepConfig.train_mean = False`): Adam's moments of the mean stay zero and so does its
+update, bit for bit. The data term pulls B_hat in where moving a parameter changes the
+rendered training views, the volume term pushes it out everywhere, so B_hat ends large where
+the training views leave the model free: U (Eq. 10) and its per-pixel maps then follow
+what the views did not constrain, as for a jointly trained field.
+
+The loop is `mfsample.train.train` itself (render budgets, checkpoints and resume, logs),
+without densification (the model keeps the file's Gaussians), with every SH band of the file
+active from the first step, and a sample rendered at every step. Each step costs what a step
+of joint training costs (one render and its backward pass); `config.train.num_steps` sets
+how many.
+"""
+
+import dataclasses
+
+from mfsample.data import ply
+from mfsample.train.loop import TrainResult, make_setup, train
+
+
+def posthoc_config(config, ply_path):
+  """A copy of training `config` that fits B_hat to the mean of the 3DGS file `ply_path`.
+
+  Starts from the file (`model.init_from = "ply"`, its SH degree), switches densification,
+  opacity resets and the SH schedule off, and renders a sample at every step
+  (`sampler.stochastic_until = None`: a step that renders the mean gives B_hat no data
+  gradient). Everything else (sampler, loss, B_hat's learning rates and bounds, render
+  budget, `train.num_steps`) is the config's.
+  """
+  if config.sampler.kind == "deterministic":
+    raise ValueError("config.sampler.kind = 'deterministic' has no B_hat to fit; use "
+                     "'lowrank' (the paper's), 'block' or 'diagonal'")
+  degree = ply.sh_degree_of(ply.load_ply(ply_path))  # validates the file before anything runs
+  cfg = config.copy_and_resolve_references()
+  with cfg.unlocked():
+    cfg.model.init_from = "ply"
+    cfg.model.ply_path = str(ply_path)
+    cfg.model.sh_degree = degree
+    cfg.densify.start = 0
+    cfg.densify.stop = 0  # no host events at all (`loop._host_events`)
+    cfg.densify.sh_degree_every = 0  # every band of the file from the first step
+    cfg.sampler.stochastic_until = None
+  return cfg
+
+
+def fit_spread(config, views, ply_path, *, checkpoint_dir=None, key=None, settings=None,
+               **train_kwargs) -> TrainResult:
+  """Fits B_hat of a stochastic field whose mean is the 3DGS model `ply_path`.
+
+  Args:
+    config: a training config (`mfsample.train.default_config()`): its sampler, loss,
+      B_hat learning rates and bounds, render budget and `train.num_steps` (the fit's
+      length) apply; see `posthoc_config` for what is overridden.
+    views: the model's training `Views`.
+    ply_path: the model, a 3DGS `point_cloud.ply` (`mfsample.data.ply.load_ply`).
+    checkpoint_dir: if set, resume from and write checkpoints there.
+    key: optional PRNG key replacing `config.seed` (B_hat's start, z, view order).
+    settings: optional `RenderSettings` to start from (a budget that sufficed before).
+    **train_kwargs: passed to `mfsample.train.train` (`stop_at`, `num_views`, `max_traces`).
+
+  Returns:
+    `TrainResult`: `state.model` is the stochastic field, its mean the file's Gaussians
+    exactly; `train_seconds` the cost of the fit.
+  """
+  cfg = posthoc_config(config, ply_path)
+  setup = make_setup(cfg, views, key=key)
+  step_config = dataclasses.replace(setup.step_config, train_mean=False)
+  if settings is not None:
+    step_config = dataclasses.replace(step_config, settings=settings)
+  setup = setup._replace(step_config=step_config)
+  return train(cfg, views, key=key, setup=setup, checkpoint_dir=checkpoint_dir, **train_kwargs)
