@@ -145,3 +145,15 @@ def test_sphere_candidates_follow_the_capture():
   np.testing.assert_allclose(np.asarray(depth)[:, 0], 2.0, rtol=1e-5)  # looking at it
   assert (cams.width, cams.height) == (20, 16) and float(cams.fx[3]) == float(train.fx[0])
   np.testing.assert_array_equal(top_k([0.1, 0.5, 0.5, 0.2], 3), [1, 2, 3])
+
+
+def test_a_workdir_whose_call_failed_early_is_taken_over(tmp_path):
+  config = uncertainty_configs.get_config("tiny")
+  config.data.kind = "colmap"
+  config.data.path = str(tmp_path / "typo")
+  workdir = str(tmp_path / "w")
+  with pytest.raises(FileNotFoundError, match="typo"):
+    run_uncertainty(config, workdir)
+  config.data.path = str(tmp_path / "still_missing")  # a new config, nothing computed yet
+  with pytest.raises(FileNotFoundError, match="still_missing"):
+    run_uncertainty(config, workdir)

@@ -7,10 +7,16 @@ import plyfile
 import pytest
 
 from mfsample.data import DatasetError
-from mfsample.data.ply import export_ply, load_ply, ply_arrays, sh_degree_of
+from mfsample.data.ply import (
+                               export_gaussians,
+                               export_ply,
+                               load_ply,
+                               ply_arrays,
+                               sh_degree_of,
+)
 from mfsample.model import GROUPS, SamplerSpec, init_model, mean_gaussians, model_from_mean
 from mfsample.renderer import RenderSettings, render
-from mfsample.testing import orbit_camera
+from mfsample.testing import orbit_camera, random_gaussians
 
 SPEC = SamplerSpec(kind="lowrank", rank=2, groups=("means",), bounds=(("means", 1.0),))
 SCALES = {g: 1e-3 for g in GROUPS}
@@ -159,3 +165,14 @@ def test_ply_arrays_write_live_rows_only():
   model = _model(sh_degree=0)
   arrays = ply_arrays(model.params.mean, model.mask)
   assert len(arrays["x"]) == 5 and "f_rest_0" not in arrays
+
+
+def test_gaussians_round_trip_through_raw_parameters(tmp_path):
+  gaussians = random_gaussians(30, sh_degree=2, seed=4)
+  path = export_gaussians(tmp_path / "g.ply", gaussians)
+  model = model_from_mean(jax.random.PRNGKey(0), load_ply(path), spec=SPEC, init_scales=SCALES)
+  back = mean_gaussians(model)
+  for name in ("means", "scales", "quats", "opacities", "sh"):
+    np.testing.assert_allclose(np.asarray(getattr(back, name))[:30],
+                               np.asarray(getattr(gaussians, name)), rtol=2e-6, atol=1e-7,
+                               err_msg=name)

@@ -18,7 +18,7 @@ def _pretrained(path, dataset, num_unseen=40):
   """A "pretrained" model as a .ply: the ground truth of the synthetic dataset (its training
   views see it and it renders them exactly: the mean sits at the optimum) and Gaussians far
   away where no training camera looks. SH degree 1 (with zero band-1 coefficients)."""
-  from mfsample.data.ply import ply_arrays, write_ply
+  from mfsample.data.ply import ply_arrays, raw_from_gaussians, write_ply
   from mfsample.train import data as data_lib
 
   syn = tiny_config().data.synthetic
@@ -32,16 +32,12 @@ def _pretrained(path, dataset, num_unseen=40):
   far = far[np.arccos(np.clip(far @ looks.T, -1, 1)).min(axis=1) > 0.65][:num_unseen]
   assert len(far) == num_unseen
   n, m = syn.num_gaussians, num_unseen
-  mean = {
-      "means": np.concatenate([np.asarray(truth.means), 30.0 * far]),
-      "log_scales": np.concatenate([np.log(np.asarray(truth.scales)), np.full((m, 3), -1.0)]),
-      "quats": np.concatenate([np.asarray(truth.quats), np.tile([1.0, 0, 0, 0], (m, 1))]),
-      "opacity_logits": np.concatenate([np.log(np.asarray(truth.opacities))
-                                        - np.log1p(-np.asarray(truth.opacities)),
-                                        np.zeros(m)]),
-      "sh_dc": np.concatenate([np.asarray(truth.sh)[:, 0], np.zeros((m, 3))]),
-      "sh_rest": np.zeros((n + m, 3, 3)),
-  }
+  raw = raw_from_gaussians(truth)
+  extra = {"means": 30.0 * far, "log_scales": np.full((m, 3), -1.0),
+           "quats": np.tile([1.0, 0, 0, 0], (m, 1)), "opacity_logits": np.zeros(m),
+           "sh_dc": np.zeros((m, 3))}
+  mean = {g: np.concatenate([raw[g], extra[g]]) for g in raw}
+  mean["sh_rest"] = np.zeros((n + m, 3, 3))
   write_ply(path, ply_arrays(mean))
   return path, n
 

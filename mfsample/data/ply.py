@@ -101,6 +101,31 @@ def export_ply(path, model):
   return write_ply(path, ply_arrays(model.params.mean, model.mask))
 
 
+def raw_from_gaussians(gaussians):
+  """{group: [N, ...] float32} raw parameters of activated `Gaussians` (live rows only).
+
+  The inverse of `mfsample.model.activate`: log-scales, opacity logits (opacities clipped to
+  [1e-6, 1 - 1e-6] first, so both stay finite), quaternions and SH coefficients as they are.
+  """
+  live = (np.ones(gaussians.means.shape[0], bool) if gaussians.mask is None
+          else np.asarray(gaussians.mask, bool))
+  opacity = np.clip(np.asarray(gaussians.opacities, np.float64)[live], 1e-6, 1.0 - 1e-6)
+  sh = np.asarray(gaussians.sh, np.float32)[live]
+  raw = {"means": np.asarray(gaussians.means, np.float32)[live],
+         "log_scales": np.log(np.asarray(gaussians.scales, np.float64)[live]),
+         "quats": np.asarray(gaussians.quats, np.float32)[live],
+         "opacity_logits": np.log(opacity) - np.log1p(-opacity),
+         "sh_dc": sh[:, 0]}
+  if sh.shape[1] > 1:
+    raw["sh_rest"] = sh[:, 1:]
+  return {g: np.asarray(v, np.float32) for g, v in raw.items()}
+
+
+def export_gaussians(path, gaussians):
+  """Writes activated `Gaussians` (e.g. `mfsample.testing.random_gaussians`) as a 3DGS file."""
+  return write_ply(path, ply_arrays(raw_from_gaussians(gaussians)))
+
+
 # ------------------------------------------------------------------------- reading
 
 

@@ -52,6 +52,10 @@ def check_config(config):
   checks.check_int(config, "eval.save_images", minimum=0)
   if config.data.kind in ("colmap", "llff"):
     checks.check_int(config, "data.holdout_every", minimum=2)
+  if (config.model.init_from == "points" and config.data.kind != "colmap"
+      and not config.posthoc.ply):
+    raise checks.ConfigError(f"config.model.init_from = 'points' needs the sparse points of a "
+                             f"COLMAP capture, but config.data.kind = {config.data.kind!r}")
   if config.next_views.candidates == "unused" and config.views.train_every == 1:
     raise checks.ConfigError("config.views.train_every = 1 trains on every view and leaves no "
                              "unused candidate: set it > 1 or next_views.candidates = 'sphere'")
@@ -68,9 +72,14 @@ def _comparable(config_dict):
 
 
 def check_workdir(config, workdir):
-  """Refuses a workdir written with a different config (the fields are named)."""
+  """Refuses a workdir holding work (checkpoints, results) of a different config, naming the
+  differing fields. A workdir whose earlier call failed before computing anything (a wrong
+  data path, say) is taken over."""
   path = os.path.join(workdir, "config.json")
-  if not os.path.exists(path):
+  checkpoints = os.path.join(workdir, "checkpoints")
+  holds_work = (os.path.exists(os.path.join(workdir, "results.json"))
+                or (os.path.isdir(checkpoints) and os.listdir(checkpoints)))
+  if not os.path.exists(path) or not holds_work:
     return
   with open(path) as f:
     old = _comparable(json.load(f))

@@ -55,6 +55,9 @@ def initial_model(config, setup, bounds, points, key):
     if not path:
       raise ValueError("config.model.init_from = 'ply' needs config.model.ply_path, the "
                        "3DGS point_cloud.ply to start from")
+    from mfsample.train.data import resolve_path
+
+    path = resolve_path(path)
     mean = ply.load_ply(path)
     degree = ply.sh_degree_of(mean)
     if degree != sh_degree:
