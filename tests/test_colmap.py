@@ -10,6 +10,7 @@ from conftest import tiny_config
 
 from mfsample.camera import Camera
 from mfsample.data import DatasetError, PointCloud, export_colmap, load_colmap
+from mfsample.data._io import area_downscale
 from mfsample.gaussians import Gaussians
 from mfsample.planning.poses import downscale_camera
 from mfsample.renderer import RenderSettings, render
@@ -47,7 +48,7 @@ def _render_all(gaussians, cameras):
 @pytest.fixture(scope="module")
 def capture(tmp_path_factory):
   """A COLMAP capture written by `export_colmap` (pycolmap's writer), with a half-size
-  `images_2/` copy rendered at half resolution, and a text-format twin of its model."""
+  `images_2/` copy, and a text-format twin of its model."""
   from mfsample.data import Views
 
   root = tmp_path_factory.mktemp("capture")
@@ -55,11 +56,12 @@ def capture(tmp_path_factory):
   images = _render_all(gaussians, cameras)
   views = Views(images, cameras, names=tuple(f"frame_{i}" for i in range(4)))
   export_colmap(root, views, points)
+  # images_2/: a 2x box filter, as downscaled folders are made (pixel p -> p / 2 exactly).
   (root / "images_2").mkdir()
-  half = _render_all(gaussians, downscale_camera(cameras, 2))
-  for name, image in zip(sorted(p.name for p in (root / "images").iterdir()), half,
+  for name, image in zip(sorted(p.name for p in (root / "images").iterdir()), images,
                          strict=True):
-    iio.imwrite(root / "images_2" / name, np.round(image * 255).astype(np.uint8))
+    half = area_downscale(image, 2)
+    iio.imwrite(root / "images_2" / name, np.round(half * 255).astype(np.uint8))
   text = tmp_path_factory.mktemp("text")
   shutil.copytree(root / "images", text / "images")
   recon = pycolmap.Reconstruction(str(root / "sparse" / "0"))
@@ -98,9 +100,9 @@ def test_projection_agrees_with_colmaps_own(capture):
 
 
 def test_known_points_land_where_they_belong(capture):
-  """In every image on disk, the blob of each point is centred on the pixel where the loaded
-  camera projects that point, and rendering the points with the loaded cameras reproduces
-  the images."""
+  """In every image on disk (full size and images_2), the blob of each point is centred on
+  the pixel where the loaded camera projects that point, and rendering the points with the
+  loaded cameras reproduces the images."""
   root, _, gaussians, *_ = capture
   for factor in (1, 2):
     views, points = load_colmap(root, factor=factor)
@@ -120,9 +122,10 @@ def test_known_points_land_where_they_belong(capture):
                   np.sum(weight * (rows + 0.5)) / weight.sum())
         np.testing.assert_allclose(centre, (u0, v0), atol=0.15 * (3 - factor),
                                    err_msg=f"factor {factor}, view {v}, point {p}")
-    again = _render_all(gaussians, views.cameras)
-    np.testing.assert_allclose(again, views.images, atol=0.5 / 255 + 2e-4)
     assert views.cameras.width == 64 // factor
+  views, _ = load_colmap(root)
+  np.testing.assert_allclose(_render_all(gaussians, views.cameras), views.images,
+                             atol=0.5 / 255 + 2e-4)
 
 
 def test_images_n_scales_the_intrinsics(capture):

@@ -112,7 +112,7 @@ def test_config_is_checked_before_anything_is_written(tmp_path):
   assert not os.path.exists(tmp_path / "w")
 
 
-@pytest.mark.parametrize("variant", ["", "tiny"])
+@pytest.mark.parametrize("variant", ["", "tiny", "colmap,posthoc"])
 def test_variants_load_from_the_command_line(variant):
   spec = f"uncertainty.py:{variant}" if variant else "uncertainty.py"
   argv = ["prog", f"--config={ROOT / 'configs' / spec}", "--config.next_views.k=7",
@@ -122,7 +122,8 @@ def test_variants_load_from_the_command_line(variant):
                                   sys_argv=argv)
   fv(argv)
   assert fv.config.next_views.k == 7 and fv.config.posthoc.ply == "model.ply"
-  assert fv.config.data.kind == ("synthetic" if variant else "scene")
+  assert fv.config.data.kind == {"": "scene", "tiny": "synthetic", "colmap,posthoc": "colmap"}[
+      variant]
   with pytest.raises(ValueError, match="unknown variant"):
     uncertainty_configs.get_config("huge")
 
