@@ -129,7 +129,7 @@ def default_config():
   # ... or (if > 0) wider than this many pixels on screen. 3DGS passes 20 px, but resets the
   # radii it compares right before, so in effect it never prunes by screen size; 0 = off.
   densify.max_screen_size = 0.0
-  densify.sh_degree_every = 1000  # The active SH degree rises by one this often (0: all at once).
+  densify.sh_degree_every = 1000  # The active SH degree rises by one this often.
 
   # ----------------------------------------------------------------- render budget
   config.render = render = ml_collections.ConfigDict()  # Static renderer settings.

@@ -30,11 +30,12 @@ from mfsample.train.loop import TrainResult, make_setup, train
 def posthoc_config(config, ply_path):
   """A copy of training `config` that fits B_hat to the mean of the 3DGS file `ply_path`.
 
-  Starts from the file (`model.init_from = "ply"`, its SH degree), switches densification,
-  opacity resets and the SH schedule off, and renders a sample at every step
-  (`sampler.stochastic_until = None`: a step that renders the mean gives B_hat no data
-  gradient). Everything else (sampler, loss, B_hat's learning rates and bounds, render
-  budget, `train.num_steps`) is the config's.
+  Starts from the file (`model.init_from = "ply"`, its SH degree), switches densification and
+  opacity resets off, and renders a sample at every step (`sampler.stochastic_until = None`:
+  a step that renders the mean gives B_hat no data gradient). Everything else (sampler,
+  loss, B_hat's learning rates and bounds, render budget, `train.num_steps`) is the
+  config's. (`fit_spread` also freezes the mean and activates every SH band from the first
+  step, in the step's static settings.)
   """
   if config.sampler.kind == "deterministic":
     raise ValueError("config.sampler.kind = 'deterministic' has no B_hat to fit; use "
@@ -47,7 +48,6 @@ def posthoc_config(config, ply_path):
     cfg.model.sh_degree = degree
     cfg.densify.start = 0
     cfg.densify.stop = 0  # no host events at all (`loop._host_events`)
-    cfg.densify.sh_degree_every = 0  # every band of the file from the first step
     cfg.sampler.stochastic_until = None
   return cfg
 
@@ -73,7 +73,8 @@ def fit_spread(config, views, ply_path, *, checkpoint_dir=None, key=None, settin
   """
   cfg = posthoc_config(config, ply_path)
   setup = make_setup(cfg, views, key=key)
-  step_config = dataclasses.replace(setup.step_config, train_mean=False)
+  # The mean frozen, and every SH band of the file active from the first step.
+  step_config = dataclasses.replace(setup.step_config, train_mean=False, sh_degree_every=0)
   if settings is not None:
     step_config = dataclasses.replace(step_config, settings=settings)
   setup = setup._replace(step_config=step_config)
