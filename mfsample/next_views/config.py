@@ -5,8 +5,8 @@ model, B_hat, the loss, the optimiser, densification and the render budget, each
 its comment there) with the job's defaults below, plus three blocks of its own: `posthoc`
 (bring a trained 3DGS model), `views` (which views train, which are candidates) and
 `next_views` (how candidates are scored). The default runs the built-in Mitsuba scene at
-64 x 64: a field trained on every 4th of its 100 candidate views, the other 75 ranked by U
-(about 5 minutes on two CPU cores, first captures included). `configs/uncertainty.py`
+64 x 64: a field trained 2000 steps on every 4th of its 100 candidate views, the other 75
+ranked by U (about 5 minutes of CPU time). `configs/uncertainty.py`
 selects variants; any field is overridden on the command line, e.g.
 `--config.data.kind=colmap --config.data.path=~/captures/garden --config.data.downscale=8`.
 """
