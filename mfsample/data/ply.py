@@ -21,6 +21,7 @@ non-finite values, truncated data, and ASCII files (3DGS tools write binary; an 
 a real model is gigabytes of text, and far more often a mesh or point cloud saved by mistake).
 """
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -92,7 +93,7 @@ def write_ply(path, arrays):
   path = Path(path)
   tmp = path.with_name(path.name + ".tmp")
   plyfile.PlyData([plyfile.PlyElement.describe(table, "vertex")], byte_order="<").write(str(tmp))
-  tmp.replace(path)
+  os.replace(tmp, path)
   return path
 
 

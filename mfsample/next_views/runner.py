@@ -29,11 +29,10 @@ import numpy as np
 
 from mfsample import config_checks as checks
 from mfsample import uncertainty as unc
+from mfsample import workdir as workdir_lib
 from mfsample._json import write_json
-from mfsample.planning.workdirs import differences
 from mfsample.train.initial import INIT_FROM
 
-KINDS = ("synthetic", "blender", "scene", "colmap", "llff")
 # Fields that change only how a call looks or how fast it goes: a later call may differ.
 RESUME_FREE_FIELDS = ("train.progress", "render.chunks_per_step", "next_views.figure")
 
@@ -41,7 +40,8 @@ RESUME_FREE_FIELDS = ("train.progress", "render.chunks_per_step", "next_views.fi
 def check_config(config):
   """Validates the fields the job reads (before anything is written); ConfigError names
   the field."""
-  checks.check_choice(config, "data.kind", KINDS)
+  from mfsample.train.config import validate
+  validate(config)  # every training field (data, model, sampler, loss, train, render, eval)
   checks.check_choice(config, "sampler.kind", ("lowrank", "block", "diagonal"))
   checks.check_choice(config, "model.init_from", INIT_FROM)
   checks.check_choice(config, "next_views.candidates", ("unused", "sphere"))
@@ -66,27 +66,15 @@ def check_config(config):
                               f"({resolve_path(config.posthoc.ply)})")
 
 
-def _comparable(config_dict):
-  from mfsample._json import without_fields
-  return without_fields(config_dict, RESUME_FREE_FIELDS)
-
-
 def check_workdir(config, workdir):
   """Refuses a workdir holding work (checkpoints, results) of a different config, naming the
   differing fields. A workdir whose earlier call failed before computing anything (a wrong
   data path, say) is taken over."""
-  path = os.path.join(workdir, "config.json")
   checkpoints = os.path.join(workdir, "checkpoints")
   holds_work = (os.path.exists(os.path.join(workdir, "results.json"))
-                or (os.path.isdir(checkpoints) and os.listdir(checkpoints)))
-  if not os.path.exists(path) or not holds_work:
-    return
-  with open(path) as f:
-    old = _comparable(json.load(f))
-  new = _comparable(json.loads(config.to_json_best_effort()))
-  if old != new:
-    raise ValueError(f"{workdir} holds a run made with a different config (differences: "
-                     f"{', '.join(differences(old, new))}); use a new --workdir.")
+                or (os.path.isdir(checkpoints) and bool(os.listdir(checkpoints))))
+  workdir_lib.check_same_config(config, workdir, free_fields=RESUME_FREE_FIELDS,
+                                has_results=holds_work, results="a run")
 
 
 def run_uncertainty(config, workdir):
@@ -108,8 +96,7 @@ def run_uncertainty(config, workdir):
   if os.path.exists(results_path):
     with open(results_path) as f:
       return json.load(f)
-  with open(os.path.join(workdir, "config.json"), "w") as f:
-    f.write(config.to_json_best_effort(indent=2))
+  workdir_lib.write_config(config, workdir)
   t0 = time.perf_counter()
 
   dataset = data_lib.load_dataset(config.data)

