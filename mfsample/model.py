@@ -344,6 +344,51 @@ def init_model(key, points, *, spec, sh_degree, init_scales, capacity=None,
   return Model(Params(mean, spread), signs, mask, jnp.asarray(0, jnp.int32), spec)
 
 
+def model_from_mean(key, mean, *, spec, init_scales, capacity=None):
+  """A model whose mean is the raw parameters `mean` of a trained 3DGS model, float32.
+
+  The Gaussians are kept exactly as given; B_hat starts as in `init_model` (small random
+  entries, fresh signs), ready to be fitted with the mean frozen
+  (`mfsample.train.posthoc.fit_spread`). The active SH degree is the full degree of `mean`:
+  a trained model uses every band it has.
+
+  Args:
+    key: PRNG key (B_hat entries and signs).
+    mean: {group: [N, ...]} raw parameters of every group of `group_shapes(degree)` (e.g.
+      `mfsample.data.ply.load_ply`), N >= 1.
+    spec: `SamplerSpec`.
+    init_scales: {group: float} see `init_spread`.
+    capacity: C >= N (default `capacity_bucket(N)`).
+
+  Returns:
+    `Model` with the first N rows live.
+  """
+  rest = mean.get("sh_rest")
+  sh_degree = 0 if rest is None else int(round(np.sqrt(np.shape(rest)[1] + 1))) - 1
+  shapes = group_shapes(sh_degree)
+  if set(mean) != set(shapes):
+    raise ValueError(f"mean must hold exactly the groups {sorted(shapes)}, got {sorted(mean)}")
+  n = len(mean["means"])
+  for g, shape in shapes.items():
+    if tuple(np.shape(mean[g])) != (n,) + tuple(shape):
+      raise ValueError(f"mean[{g!r}] must have shape {[n, *shape]}, got "
+                       f"{list(np.shape(mean[g]))}")
+  if n < 1:
+    raise ValueError("mean holds no Gaussians")
+  capacity = capacity_bucket(n) if capacity is None else int(capacity)
+  if capacity < n:
+    raise ValueError(f"capacity {capacity} < number of Gaussians {n}")
+  pad = padding_values(shapes, capacity - n)
+  params = {g: jnp.asarray(_pad(np.asarray(v, np.float32), capacity, pad[g]))
+            for g, v in mean.items()}
+  spread, signs = init_spread(host_rng(key), n, shapes, spec, init_scales)
+  zeros = lambda x: np.zeros((capacity,) + x.shape[1:], x.dtype)
+  spread = {g: jnp.asarray(_pad(v, capacity, zeros(v))) for g, v in spread.items()}
+  signs = {g: jnp.asarray(_pad(v, capacity, zeros(v))) for g, v in signs.items()}
+  mask = jnp.asarray(np.arange(capacity) < n)
+  return Model(Params(params, spread), signs, mask, jnp.asarray(sh_degree, jnp.int32), spec)
+
+
 def _check_finite_rows(name, x):
   bad = ~np.all(np.isfinite(x), axis=-1)
   if np.any(bad):

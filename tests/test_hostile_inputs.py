@@ -535,7 +535,7 @@ def test_training_killed_between_its_result_files_resumes(tiny_dataset, straight
   replace = os.replace
 
   def dies_on_metrics(src, dst):
-    if dst.endswith("metrics.json"):
+    if str(dst).endswith("metrics.json"):
       raise KeyboardInterrupt("killed")
     return replace(src, dst)
 

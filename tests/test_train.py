@@ -11,7 +11,7 @@ import pytest
 from conftest import tiny_config
 
 from mfsample import samplers
-from mfsample.export_ply import read_ply
+from mfsample.data.ply import load_ply
 from mfsample.renderer import render
 from mfsample.train import checkpoint as ckpt
 from mfsample.train import data as data_lib
@@ -285,8 +285,8 @@ def test_resumed_run_matches_an_uninterrupted_one(tiny_dataset, tmp_path):
   images = os.listdir(os.path.join(workdir, "images"))
   assert any(name.endswith("_uncertainty.png") for name in images)
   assert any(name.endswith("_render.png") for name in images)
-  ply = read_ply(os.path.join(workdir, "point_cloud.ply"))
-  assert len(ply["x"]) == resumed.model.num_live
+  ply = load_ply(os.path.join(workdir, "point_cloud.ply"))
+  assert len(ply["means"]) == resumed.model.num_live
   # The log survives the kill: every logged step once, in order, and the time of the
   # killed segment (steps 1-8) is counted in the total.
   with open(os.path.join(workdir, "train_log.json")) as f:

@@ -31,7 +31,7 @@ def test_relative_paths_resolve_against_the_working_directory(tmp_path, monkeypa
 
 def test_unknown_kind_is_an_error():
   config = tiny_config()
-  config.data.kind = "llff"
+  config.data.kind = "nerf"
   with pytest.raises(ValueError, match="config.data.kind"):
     data_lib.load_dataset(config.data)
 
@@ -58,3 +58,34 @@ def test_scene_extent_follows_3dgs():
   cams = Camera.look_at(eyes, jnp.zeros((2, 3)), jnp.array([0.0, 0, 1]), 0.8, 8, 8)
   assert data_lib.scene_extent(cams) == pytest.approx(2.2)
   assert data_lib.scene_extent(cams[:1]) == pytest.approx(2.2)  # one camera: its distance
+
+
+def test_llff_kind_holds_out_every_nth_view_and_boxes_the_frusta(tmp_path):
+  import imageio.v3 as iio
+  import jax.numpy as jnp
+
+  from mfsample.camera import Camera
+  from mfsample.data import poses_bounds_from_cameras
+
+  eyes = np.stack([np.linspace(-1.0, 1.0, 9), np.zeros(9), np.full(9, -4.0)], -1)
+  cams = Camera.look_at(jnp.asarray(eyes, jnp.float32), jnp.zeros((9, 3)),
+                        jnp.array([0.0, -1.0, 0.0]), 0.8, 8, 6)
+  np.save(tmp_path / "poses_bounds.npy", poses_bounds_from_cameras(cams, np.tile([1.0, 6.0],
+                                                                               (9, 1))))
+  (tmp_path / "images_8").mkdir()
+  for v in range(9):
+    iio.imwrite(tmp_path / "images_8" / f"IMG_{v}.png", np.zeros((6, 8, 3), np.uint8))
+  config = tiny_config()
+  config.data.kind = "llff"
+  config.data.path = str(tmp_path)
+  config.data.downscale = 8
+  ds = data_lib.load_dataset(config.data)
+  assert ds.test.names == ("IMG_0", "IMG_8") and len(ds.train) == 7 and ds.points is None
+  assert np.all(ds.bounds[0] < [-1.0, -0.5, -3.0]) and np.all(ds.bounds[1] > [1.0, 0.5, 1.9])
+
+  one = Camera.create(np.eye(4, dtype=np.float32)[None], 10.0, 10.0, 5.0, 5.0, 10, 10)
+  low, high = data_lib.frustum_box(one, np.array([[1.0, 2.0]]))
+  np.testing.assert_allclose(low, [-1.0, -1.0, 1.0])
+  np.testing.assert_allclose(high, [1.0, 1.0, 2.0])
+  with pytest.raises(ValueError, match="holdout_every = 1"):
+    data_lib.holdout_split(5, 1)

@@ -71,7 +71,8 @@ def default_config():
 
   # ----------------------------------------------------------------- data
   config.data = data = ml_collections.ConfigDict()
-  data.kind = "scene"  # "scene" (Mitsuba oracle), "blender" (fixed pool) or "synthetic".
+  # "scene" (Mitsuba oracle), "blender" or "colmap" (fixed pools) or "synthetic".
+  data.kind = "scene"
   data.background = (1.0, 1.0, 1.0)  # White, as the captures are composited.
   data.progress = True  # Progress bars of the captures.
   data.pool_seed = 0  # Seed of the candidate poses (test poses use pool_seed + 1).
@@ -89,6 +90,10 @@ def default_config():
   data.downscale = 5  # Integer image downscale (lego's 400 x 400 files: 80 x 80).
   data.test_every = 4  # Every n-th test view (50 of lego's 200).
   data.bounds = (-1.3, 1.3)  # Cube of the random initial points (NeRF Synthetic's).
+  # kind "colmap": a COLMAP capture at `path` (images_{downscale}/ when downscale > 1);
+  # every holdout_every-th image by name is a test view, the others the candidates. Round
+  # models start from its sparse points with round_train.model.init_from = "points".
+  data.holdout_every = 8
   # kind "synthetic": random ground-truth Gaussians rendered by mfsample (no files).
   data.synthetic = syn = ml_collections.ConfigDict()
   syn.shape = "shell"  # An opaque shell ("shell") or a see-through "cloud".

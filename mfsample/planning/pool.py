@@ -5,6 +5,9 @@
   strategies can run.
 * "blender": a NeRF Synthetic scene on disk (e.g. lego): candidates = the train split,
   test = the test split. No oracle: only the selection strategies run.
+* "colmap": a COLMAP capture (`mfsample.data.load_colmap`): candidates = the images that are
+  not held out (every `holdout_every`-th by name is a test view), its sparse points for
+  round models that start from them. No oracle.
 * "synthetic": random ground-truth Gaussians rendered by `mfsample.render` (tests and the
   notebook): every pose has a ground truth, no files and no Mitsuba needed.
 """
@@ -37,6 +40,8 @@ class Pool(NamedTuple):
     sphere: `poses.SphereSpec` of the camera sphere (always set; for a fixed pool it is
       fitted to the candidates and used only for figures).
     oracle: camera -> [H, W, 3] ground-truth image, or None for a fixed pool.
+    points: the sparse SfM `PointCloud` of a COLMAP capture (for round models whose
+      `model.init_from` is "points"), else None.
   """
 
   name: str
@@ -46,6 +51,7 @@ class Pool(NamedTuple):
   bounds: tuple
   sphere: poses.SphereSpec
   oracle: Callable | None
+  points: object = None
 
 
 def make_pool(cfg) -> Pool:
@@ -57,7 +63,10 @@ def make_pool(cfg) -> Pool:
     return _blender_pool(cfg, background)
   if cfg.kind == "synthetic":
     return _synthetic_pool(cfg, background)
-  raise ValueError(f"data.kind must be 'scene', 'blender' or 'synthetic', got {cfg.kind!r}")
+  if cfg.kind == "colmap":
+    return _colmap_pool(cfg, background)
+  raise ValueError(f"data.kind must be 'scene', 'blender', 'colmap' or 'synthetic', got "
+                   f"{cfg.kind!r}")
 
 
 def _scene_pool(cfg, background):
@@ -92,6 +101,30 @@ def _blender_pool(cfg, background):
   lo, hi = cfg.bounds
   return Pool(path.name, candidates, test, background, (np.full(3, lo), np.full(3, hi)),
               poses.SphereSpec.from_cameras(candidates.cameras), None)
+
+
+def _colmap_pool(cfg, background):
+  from mfsample.train.data import load_dataset
+
+  data = load_dataset(_as_training_data(cfg))
+  # The cameras of a capture look at the scene, not at the origin: the sphere of the figures
+  # is centred on the middle of the sparse points (or of the box without points).
+  center = 0.5 * (np.asarray(data.bounds[0], np.float64) + np.asarray(data.bounds[1]))
+  return Pool(resolve_path(cfg.path).name, data.train, data.test, background, data.bounds,
+              poses.SphereSpec.from_cameras(data.train.cameras, center), None, data.points)
+
+
+def _as_training_data(cfg):
+  """The `data` block of a training config for the capture a planning config names."""
+  from mfsample.train.config import default_config
+
+  data = default_config().data
+  data.kind = "colmap"
+  data.path = cfg.path
+  data.downscale = int(cfg.downscale)
+  data.holdout_every = int(cfg.get("holdout_every", 8))
+  data.background = tuple(cfg.background)
+  return data
 
 
 def synthetic_scene(num, seed, radius=0.6, sh_degree=0, shape="shell"):

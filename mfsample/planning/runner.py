@@ -172,12 +172,13 @@ class Trainer:
       # is process-wide: other compiled functions of the caller recompile on next use.
       jax.clear_caches()
       trained = training.train_densified(cfg, views, seed=seed, bounds=self.pool.bounds,
-                                         settings=self.settings.get(budget))
+                                         settings=self.settings.get(budget),
+                                         points=self.pool.points)
     else:
       trained = training.train_on_views(cfg, views, seed=seed, bounds=self.pool.bounds,
                                         pad_to=self.config.max_views,
                                         settings=self.settings.get(budget), state=state,
-                                        stop_at=stop_at)
+                                        stop_at=stop_at, points=self.pool.points)
     self.train_seconds += time.perf_counter() - t0
     self.settings[budget] = trained.settings
     return trained

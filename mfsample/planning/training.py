@@ -66,7 +66,7 @@ def densifies(config):
 
 
 def train_on_views(config, views, *, seed, bounds, pad_to, settings=None, state=None,
-                   stop_at=None) -> Trained:
+                   stop_at=None, points=None) -> Trained:
   """Trains a model on `views` (no densification): fresh, or continuing from `state`.
 
   The schedules (learning-rate decay, the volume term's last steps) follow
@@ -84,6 +84,7 @@ def train_on_views(config, views, *, seed, bounds, pad_to, settings=None, state=
     settings: optional `RenderSettings` to start from (a budget that sufficed before).
     state: optional `TrainState` to continue from (default: a fresh initial state).
     stop_at: stop when this many steps are done in total (default: config.train.num_steps).
+    points: the pool's SfM `PointCloud`, for `model.init_from = "points"`.
 
   Returns:
     `Trained`.
@@ -101,7 +102,7 @@ def train_on_views(config, views, *, seed, bounds, pad_to, settings=None, state=
                      "train_densified")
   setup = _setup(config, views, settings)
   if state is None:
-    state = init_state(config, setup, _box(bounds))
+    state = init_state(config, setup, _box(bounds), points)
   slots = np.minimum(np.arange(pad_to), n - 1)  # padding repeats the last view, never drawn
   result = train(config, views.subset(slots), setup=setup, state=state, stop_at=stop_at,
                  num_views=n)
@@ -122,9 +123,10 @@ def _trained(result, with_state=False) -> Trained:
                  result.state if with_state else None)
 
 
-def train_densified(config, views, *, seed, bounds, settings=None) -> Trained:
+def train_densified(config, views, *, seed, bounds, settings=None, points=None) -> Trained:
   """Trains a model on `views` with `mfsample.train.train` as it is, densification included
   (the final models' path; the rounds' when their config densifies)."""
   config = _with_seed(config, seed)
-  result = train(config, views, setup=_setup(config, views, settings), bounds=_box(bounds))
+  result = train(config, views, setup=_setup(config, views, settings), bounds=_box(bounds),
+                 points=points)
   return _trained(result)

@@ -21,10 +21,17 @@ def default_config():
 
   # ----------------------------------------------------------------- data
   config.data = data = ml_collections.ConfigDict()  # Which views to train and test on.
-  data.kind = "scene"  # "synthetic" (random Gaussians), "blender" (NeRF Synthetic), "scene".
-  data.path = "data/nerf_synthetic/lego"  # blender: scene folder (relative: to the cwd).
-  data.downscale = 1  # blender: integer image downscale factor (lego files are 400x400).
+  # "synthetic" (random Gaussians), "blender" (NeRF Synthetic), "scene" (Mitsuba), "colmap"
+  # (a COLMAP capture: mfsample.data.load_colmap) or "llff" (mfsample.data.load_llff).
+  data.kind = "scene"
+  data.path = "data/nerf_synthetic/lego"  # blender, colmap, llff: scene folder (relative: cwd).
+  # blender: integer image downscale factor (lego files are 400x400); colmap, llff: read the
+  # pre-downscaled images_{downscale}/ folder (1: images/).
+  data.downscale = 1
   data.test_every = 1  # blender: evaluate every n-th test view (1: all 200).
+  # colmap, llff: every n-th image (by name, from the first) is a test view, the others train
+  # (the Mip-NeRF 360 / 3DGS split: 8).
+  data.holdout_every = 8
   data.scene = "default"  # scene: name for mfsample.scenes.get_scene.
   data.width = 128  # scene: image width in pixels.
   data.height = 128  # scene: image height in pixels.
@@ -54,6 +61,11 @@ def default_config():
   # image has 39x fewer pixels, and ~5k points already give several per pixel footprint.
   model.init_points = 5_000
   model.init_opacity = 0.1  # Initial opacity of every Gaussian.
+  # Where the Gaussians start (mfsample.train.initial): "random" (init_points in the scene
+  # box), "points" (the dataset's SfM points and colours: data.kind "colmap") or "ply" (the
+  # Gaussians of a trained 3DGS model, model.ply_path; model.sh_degree must match it).
+  model.init_from = "random"
+  model.ply_path = ""  # init_from "ply": a 3DGS point_cloud.ply (relative: to the cwd).
   model.max_gaussians = 40_000  # Densification never exceeds this many live Gaussians.
 
   # ----------------------------------------------------------------- sampler (B_hat)
@@ -155,7 +167,8 @@ def default_config():
 
 
 # Data kinds `mfsample.train.data.load_dataset` reads (a new kind adds its name here).
-DATA_KINDS = ("synthetic", "blender", "scene")
+DATA_KINDS = ("synthetic", "blender", "scene", "colmap", "llff")
+INIT_FROM = ("random", "points", "ply")  # mfsample.train.initial
 LPIPS_NETS = ("", "vgg16", "alexnet")
 
 
@@ -178,6 +191,7 @@ def validate(config, prefix="config"):
   c.check_str(config, "data.path", **kw)
   c.check_int(config, "data.downscale", minimum=1, **kw)
   c.check_int(config, "data.test_every", minimum=1, **kw)
+  c.check_int(config, "data.holdout_every", minimum=2, **kw)
   c.check_str(config, "data.scene", non_empty=True, **kw)
   for field in ("width", "height", "num_train", "num_test"):
     c.check_int(config, f"data.{field}", minimum=1, **kw)
@@ -194,6 +208,11 @@ def validate(config, prefix="config"):
 
   c.check_int(config, "model.sh_degree", minimum=0, maximum=3, **kw)
   c.check_int(config, "model.init_points", minimum=1, **kw)
+  init_from = c.check_choice(config, "model.init_from", INIT_FROM, **kw)
+  ply_path = c.check_str(config, "model.ply_path", **kw)
+  if init_from == "ply" and not ply_path:
+    raise c.ConfigError(f"{prefix}.model.init_from = 'ply' needs {prefix}.model.ply_path, the "
+                        "3DGS point_cloud.ply to start from")
   c.check_float(config, "model.init_opacity", above=0.0, below=1.0, **kw)
   c.check_int(config, "model.max_gaussians", minimum=1, **kw)
 

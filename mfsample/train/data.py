@@ -6,6 +6,10 @@
   repository root) via `mfsample.data.load_blender`.
 * "scene": a Mitsuba scene of `mfsample.scenes` (optional extra), captured at the scene's
   candidate and test cameras.
+* "colmap": a COLMAP capture (`mfsample.data.load_colmap`, optional extra `colmap`): every
+  `holdout_every`-th image by name is a test view (the Mip-NeRF 360 / 3DGS split), and its
+  sparse points come along for `model.init_from = "points"`.
+* "llff": a forward-facing LLFF capture (`mfsample.data.load_llff`), split the same way.
 """
 
 import os
@@ -33,13 +37,16 @@ class Dataset(NamedTuple):
     test: `Views` to evaluate on.
     background: RGB tuple the images are composited on.
     bounds: (low [3], high [3]) box for the random initial point cloud
-      (`config.init_bounds`; for a Mitsuba scene the cube around its bounding sphere).
+      (`config.init_bounds`; for a Mitsuba scene the cube around its bounding sphere; for a
+      COLMAP capture the box of its points, for LLFF that of the views' frusta).
+    points: the sparse SfM `mfsample.data.colmap.PointCloud` of a COLMAP capture, else None.
   """
 
   train: Views
   test: Views
   background: tuple
   bounds: tuple
+  points: object = None
 
 
 def resolve_path(path):
@@ -58,9 +65,11 @@ def load_dataset(cfg) -> Dataset:
     train, test = _blender_views(cfg, background)
   elif cfg.kind == "scene":
     train, test, bounds = _scene_views(cfg, background)
+  elif cfg.kind in ("colmap", "llff"):
+    return _capture_dataset(cfg, background)
   else:
-    raise ValueError(f"config.data.kind must be 'synthetic', 'blender' or 'scene', "
-                     f"got {cfg.kind!r}")
+    raise ValueError(f"config.data.kind must be 'synthetic', 'blender', 'scene', 'colmap' or "
+                     f"'llff', got {cfg.kind!r}")
   return Dataset(train=train, test=test, background=background, bounds=bounds)
 
 
@@ -125,6 +134,67 @@ def _blender_views(cfg, background):
   if cfg.test_every > 1:
     test = test.subset(range(0, len(test), cfg.test_every))
   return train, test
+
+
+# ------------------------------------------------------------------------- colmap, llff
+
+
+def holdout_split(num, every):
+  """(train indices, test indices) of `num` views: every `every`-th view from the first is a
+  test view (Mip-NeRF 360 and 3DGS hold out every 8th image of a capture sorted by name)."""
+  every = int(every)
+  if every < 2:
+    raise ValueError(f"config.data.holdout_every = {every}: must be an integer >= 2")
+  index = np.arange(num)
+  test = index[index % every == 0]
+  train = index[index % every != 0]
+  if len(train) == 0:
+    raise ValueError(f"{num} view(s) and holdout_every = {every} leave no training view")
+  return train, test
+
+
+def _capture_dataset(cfg, background):
+  from mfsample.data import load_colmap, load_llff
+
+  path = resolve_path(cfg.path)
+  points = None
+  if cfg.kind == "colmap":
+    views, points = load_colmap(path, factor=int(cfg.downscale), background=background)
+    if len(points):
+      bounds = points.box()
+    else:  # no points: the box around the cameras
+      centers = np.asarray(views.cameras.center, np.float64)
+      radius = scene_extent(views.cameras)
+      bounds = (centers.mean(0) - radius, centers.mean(0) + radius)
+  else:
+    views, depth_bounds = load_llff(path, factor=int(cfg.downscale))
+    bounds = frustum_box(views.cameras, depth_bounds)
+  train, test = holdout_split(len(views), cfg.holdout_every)
+  bounds = tuple(np.asarray(b, np.float32) for b in bounds)
+  return Dataset(train=views.subset(train), test=views.subset(test), background=background,
+                 bounds=bounds, points=points)
+
+
+def frustum_box(cameras: Camera, depth_bounds):
+  """(low [3], high [3]) around what the cameras see between their near and far depths.
+
+  Args:
+    cameras: `Camera` batched over V.
+    depth_bounds: [V, 2] (near, far) camera z-depths.
+  """
+  w2c = np.asarray(cameras.world_to_camera, np.float64)
+  rot, t = w2c[:, :3, :3], w2c[:, :3, 3]
+  fx, fy, cx, cy = (np.asarray(getattr(cameras, k), np.float64)[:, None]
+                    for k in ("fx", "fy", "cx", "cy"))
+  u = np.array([0.0, cameras.width, 0.0, cameras.width])[None]
+  v = np.array([0.0, 0.0, cameras.height, cameras.height])[None]
+  rays = np.stack([(u - cx) / fx, (v - cy) / fy, np.ones_like(u + cx)], -1)  # [V, 4, 3]
+  corners = []
+  for d in (0, 1):
+    cam = rays * np.asarray(depth_bounds, np.float64)[:, d, None, None]
+    corners.append(np.einsum("vji,vcj->vci", rot, cam - t[:, None]))  # R^T (x - t)
+  corners = np.concatenate(corners, axis=1).reshape(-1, 3)
+  return corners.min(0), corners.max(0)
 
 
 # ------------------------------------------------------------------------- scene

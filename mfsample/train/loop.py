@@ -21,15 +21,15 @@ import jax.numpy as jnp
 import numpy as np
 
 from mfsample import workdir as workdir_lib
-from mfsample._json import atomic_path, without_fields, write_json
-from mfsample.model import GROUPS, SamplerSpec, group_shapes, init_model
+from mfsample._json import without_fields, write_json
+from mfsample.model import GROUPS, SamplerSpec, group_shapes
 from mfsample.renderer.budget import BudgetExceededError, fit_budget
 from mfsample.renderer.settings import RenderSettings
 from mfsample.samplers import sobol_z
 from mfsample.train import checkpoint as ckpt
 from mfsample.train import data as data_lib
 from mfsample.train import densify as densify_lib
-from mfsample.train import optim
+from mfsample.train import initial, optim
 from mfsample.train.config import validate
 from mfsample.train.step import StepConfig, TrainState, init_train_state, make_train_step
 
@@ -157,15 +157,13 @@ def make_setup(config, train_views, *, extent=None, key=None):
                     num_steps=num_steps, sobol=sobol)
 
 
-def init_state(config, setup: TrainSetup, bounds):
-  """The step-0 `TrainState`: random points in the box `bounds` = (low [3], high [3])."""
-  rng = np.random.default_rng([setup.seed, 0])
-  low, high = (np.asarray(b, np.float64) for b in bounds)
-  points = rng.uniform(low, high, (int(config.model.init_points), 3))
+def init_state(config, setup: TrainSetup, bounds, points=None):
+  """The step-0 `TrainState` of `config.model.init_from` (`mfsample.train.initial`): random
+  points in the box `bounds` = (low [3], high [3]), the dataset's SfM `points` (a
+  `PointCloud`), or a trained model's .ply."""
   key = jax.random.PRNGKey(setup.seed)
   k_model, k_train = jax.random.split(key)
-  model = init_model(k_model, points, spec=setup.spec, sh_degree=int(config.model.sh_degree),
-                     init_scales=setup.init_scales, init_opacity=config.model.init_opacity)
+  model = initial.initial_model(config, setup, bounds, points, k_model)
   return init_train_state(model, setup.step_config, k_train)
 
 
@@ -187,7 +185,7 @@ def _meta(config, setup, state, history, train_seconds):
           "config": resumable_config(config)}
 
 
-def restore_latest(config, setup, bounds, directory):
+def restore_latest(config, setup, bounds, directory, points=None):
   """(state, setup, meta) from the newest intact checkpoint in `directory`, or None if none.
 
   `meta` holds the training log up to that step ("history") and the wall-clock spent
@@ -208,7 +206,7 @@ def restore_latest(config, setup, bounds, directory):
     try:
       meta = ckpt.read_meta(path)
       _check_checkpoint_config(config, setup, meta, path)
-      template = init_state(config, setup, bounds)
+      template = init_state(config, setup, bounds, points)
       template = densify_lib.grow_capacity(template, meta["capacity"])
       state, meta = ckpt.restore_checkpoint(path, template)
     except ckpt.CorruptCheckpointError as e:
@@ -258,7 +256,7 @@ def _host_events(config, setup, state, step):
 
 
 def train(config, views, key=None, *, setup=None, state=None, bounds=None,
-          checkpoint_dir=None, stop_at=None, max_traces=None, num_views=None):
+          checkpoint_dir=None, stop_at=None, max_traces=None, num_views=None, points=None):
   """Trains a stochastic Gaussian field on `views` (reusable: planning calls this).
 
   Everything random is a function of the seed (`key` if given, else `config.seed`) and
@@ -281,6 +279,7 @@ def train(config, views, key=None, *, setup=None, state=None, bounds=None,
     num_views: draw the step's view among the first `num_views` of `views` only (default:
       all). Callers that pad `views` to a fixed count keep one compilation of the step
       while the number of real views grows (planning rounds).
+    points: the dataset's SfM `PointCloud`, for `config.model.init_from = "points"`.
 
   Returns:
     `TrainResult`.
@@ -294,13 +293,13 @@ def train(config, views, key=None, *, setup=None, state=None, bounds=None,
     bounds = (np.full(3, lo), np.full(3, hi))
   history, seconds_before = [], 0.0
   if state is None and checkpoint_dir:
-    restored = restore_latest(config, setup, bounds, checkpoint_dir)
+    restored = restore_latest(config, setup, bounds, checkpoint_dir, points)
     if restored is not None:
       state, setup, meta = restored
       history = list(meta.get("history", []))
       seconds_before = float(meta.get("train_seconds", 0.0))
   if state is None:
-    state = init_state(config, setup, bounds)
+    state = init_state(config, setup, bounds, points)
   views = data_lib.to_device(views)
   m = setup.step_config.num_samples
   step_fn = make_train_step(setup.step_config, max_traces)
@@ -380,7 +379,8 @@ def train_and_evaluate(config, workdir):
   Returns:
     the final `TrainState`.
   """
-  from mfsample import export_ply, metrics
+  from mfsample import metrics
+  from mfsample.data import ply as export_ply
   from mfsample.train import evaluate as eval_lib
 
   validate(config)
@@ -388,7 +388,7 @@ def train_and_evaluate(config, workdir):
   dataset = data_lib.load_dataset(config.data)
   workdir_lib.write_config(config, workdir)
   result = train(config, dataset.train, bounds=dataset.bounds,
-                 checkpoint_dir=os.path.join(workdir, "checkpoints"))
+                 checkpoint_dir=os.path.join(workdir, "checkpoints"), points=dataset.points)
   state, setup = result.state, result.setup
   write_json(os.path.join(workdir, "train_log.json"), result.history)
 
@@ -410,8 +410,7 @@ def train_and_evaluate(config, workdir):
   eval_lib.save_images(os.path.join(workdir, "images"), ev, dataset.test,
                        num=config.eval.save_images)
   if config.eval.export_ply:
-    with atomic_path(os.path.join(workdir, "point_cloud.ply")) as tmp:
-      export_ply.export_ply(tmp, model)
+    export_ply.export_ply(os.path.join(workdir, "point_cloud.ply"), model)  # atomic
   summary = dict(ev.metrics)
   summary.update({
       "sampler": model.spec.kind, "rank": model.spec.rank,

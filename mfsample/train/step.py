@@ -87,11 +87,15 @@ class StepConfig:
     volume_every: the volume term is applied on every `volume_every`-th step only.
     volume_until: no volume term from this step on (authors: the last 100 steps).
     stats_until: densification statistics are accumulated before this step.
-    sh_degree_every: the active SH degree rises by one every this many steps (3DGS: 1000).
+    sh_degree_every: the active SH degree rises by one every this many steps (3DGS: 1000);
+      0: every band from the first step (a model trained elsewhere).
     stochastic_until: from this step on the step renders the mean (z = 0), while the
       volume term goes on as configured. The paper samples at every step (the default,
       never); the authors' code stops after the first opacity reset (step 3000).
     rates: `optim.LearningRates` of the per-group Adam.
+    train_mean: False freezes the mean: its gradient is stopped, so Adam's moments of it stay
+      zero and its update is exactly zero; only B_hat is fitted (post-hoc uncertainty of a
+      pretrained model, `mfsample.train.posthoc`).
   """
 
   settings: RenderSettings = RenderSettings()
@@ -105,6 +109,7 @@ class StepConfig:
   sh_degree_every: int = 1000
   stochastic_until: int = 2**31 - 1
   rates: optim.LearningRates = optim.LearningRates()
+  train_mean: bool = True
 
   @property
   def optimizer(self):
@@ -141,8 +146,11 @@ def train_step(state: TrainState, images, cameras, view, sobol_rows, *, cfg: Ste
   step = state.step
   model = state.model
   max_degree = model.max_sh_degree
-  model = model.replace(sh_degree=jnp.minimum(step // cfg.sh_degree_every, max_degree)
-                        .astype(jnp.int32))
+  if cfg.sh_degree_every > 0:
+    model = model.replace(sh_degree=jnp.minimum(step // cfg.sh_degree_every, max_degree)
+                          .astype(jnp.int32))
+  else:
+    model = model.replace(sh_degree=jnp.asarray(max_degree, jnp.int32))
   image = images[view]
   camera = cameras[view]
   key = jax.random.fold_in(state.key, step)
@@ -153,6 +161,8 @@ def train_step(state: TrainState, images, cameras, view, sobol_rows, *, cfg: Ste
   offset2d = jnp.zeros((model.capacity, 2), model.params.mean["means"].dtype)
 
   def loss_fn(params, offset2d):
+    if not cfg.train_mean:
+      params = params._replace(mean=jax.lax.stop_gradient(params.mean))
     m = model.replace(params=params)
 
     def one(z_i):

@@ -1,0 +1,328 @@
+"""COLMAP reconstructions: a sparse model (binary or text) and its images, read with `pycolmap`.
+
+The layout of COLMAP's output, of Mip-NeRF 360 and of every 3DGS tool:
+
+  scene/
+    images/            the photographs (the names the sparse model refers to)
+    images_2/ ...      optional pre-downscaled copies (Mip-NeRF 360 ships 2, 4 and 8)
+    sparse/0/          cameras, images, points3D (.bin or .txt; rigs and frames in COLMAP 3.12+)
+
+Conventions, as read here:
+
+* COLMAP's `cam_from_world` maps world points to camera axes x right, y down, z forward: it
+  is `Camera.world_to_camera` as it is (OpenCV axes).
+* COLMAP puts the centre of the upper-left pixel at (0.5, 0.5), as `mfsample.camera` does, so
+  focal lengths and principal points carry over unchanged. Images read from a downscaled
+  folder scale them by the ratio of the image size to the calibrated size, per axis (folders
+  made by resizing round the size).
+* Only pinhole cameras render correctly with a pinhole renderer: PINHOLE and SIMPLE_PINHOLE
+  are read; SIMPLE_RADIAL, RADIAL, OPENCV and FULL_OPENCV only when their distortion
+  parameters are all exactly zero. Any other camera gets an error naming it: undistort the
+  capture first (COLMAP's `image_undistorter`, as 3DGS's `convert.py` does).
+* Views are ordered by image name (as 3DGS and nerfstudio order them), and named by the
+  image name without its extension. Images without a pose are not part of the model and
+  are skipped.
+* The sparse points come with their colours, for the "SfM points" initialisation of 3DGS.
+* Coordinates are returned as stored (no recentring or rescaling; 3DGS uses them as they
+  are and derives the scene extent from the cameras).
+
+`export_colmap` writes `Views` (and optionally points) in this layout with pycolmap's own
+writer, for other tools and for tests.
+"""
+
+from pathlib import Path
+from typing import NamedTuple
+
+import numpy as np
+
+from mfsample.camera import Camera
+from mfsample.data import _io
+from mfsample.data.views import Views
+
+# Camera models read as pinholes: {model: number of leading focal / principal point
+# parameters}. The ones with distortion parameters are accepted only when those are all 0.
+_PINHOLE_MODELS = {"SIMPLE_PINHOLE": 3, "PINHOLE": 4}
+_ZERO_DISTORTION_MODELS = {"SIMPLE_RADIAL": 3, "RADIAL": 3, "OPENCV": 4, "FULL_OPENCV": 4}
+
+_UNDISTORT_HINT = ("undistort the capture first, e.g. `colmap image_undistorter --image_path "
+                   "scene/input --input_path scene/distorted/sparse/0 --output_path scene "
+                   "--output_type COLMAP` (3DGS's convert.py does this), which writes PINHOLE "
+                   "cameras and undistorted images")
+
+
+class PointCloud(NamedTuple):
+  """The sparse points of a reconstruction.
+
+  Attributes:
+    xyz: [P, 3] float32 world coordinates.
+    rgb: [P, 3] float32 colours in [0, 1].
+  """
+
+  xyz: np.ndarray
+  rgb: np.ndarray
+
+  def __len__(self):
+    return len(self.xyz)
+
+  def box(self, percentile=1.0):
+    """(low [3], high [3]) of the points between the `percentile` and 100 - `percentile`
+    percentiles per axis: the scene, without the few far-off points (sky, mismatches) that
+    a real reconstruction always has."""
+    if len(self.xyz) == 0:
+      raise ValueError("the point cloud is empty")
+    low = np.percentile(self.xyz, percentile, axis=0)
+    high = np.percentile(self.xyz, 100.0 - percentile, axis=0)
+    return low.astype(np.float32), high.astype(np.float32)
+
+
+def _pycolmap():
+  try:
+    import pycolmap
+  except ImportError as err:
+    raise ImportError("COLMAP datasets need pycolmap, an optional extra: pip install "
+                      "'mfsample[colmap]' (or pip install pycolmap)") from err
+  return pycolmap
+
+
+def find_sparse(root):
+  """The sparse model folder of a scene: `sparse/0`, else `sparse`, else the folder itself."""
+  root = Path(root)
+  for candidate in (root / "sparse" / "0", root / "sparse", root):
+    if any((candidate / f"cameras{ext}").is_file() for ext in (".bin", ".txt")):
+      return candidate
+  raise FileNotFoundError(
+      f"no COLMAP sparse model under {root}: expected cameras.bin or cameras.txt (with images "
+      f"and points3D) in {root / 'sparse' / '0'}, {root / 'sparse'} or {root}.")
+
+
+def read_reconstruction(sparse):
+  """A `pycolmap.Reconstruction` from a sparse model folder (binary or text).
+
+  Raises:
+    FileNotFoundError: the folder or its model files are missing.
+    DatasetError: pycolmap cannot parse the files (the message names the folder).
+  """
+  pycolmap = _pycolmap()
+  sparse = _io.require_dir(sparse, "COLMAP sparse model folder")
+  for name in ("cameras", "images", "points3D"):
+    if not any((sparse / f"{name}{ext}").is_file() for ext in (".bin", ".txt")):
+      raise FileNotFoundError(f"{sparse / (name + '.bin')} not found (nor {name}.txt): a "
+                              "COLMAP sparse model has cameras, images and points3D files.")
+  try:
+    return pycolmap.Reconstruction(str(sparse))
+  except (ValueError, IndexError, RuntimeError, OSError) as e:
+    raise _io.DatasetError(f"{sparse}: cannot read the COLMAP model ({e}).") from e
+
+
+def load_colmap(path, *, factor=1, sparse=None, background=(1.0, 1.0, 1.0)):
+  """Loads a COLMAP capture: posed images and the sparse points.
+
+  Args:
+    path: the scene folder, holding `images/` (or `images_{factor}/`) and the sparse model.
+    factor: read the pre-downscaled `images_{factor}/` folder (1: `images/`); intrinsics are
+      scaled to the size of the images found there.
+    sparse: the sparse model folder (default: `sparse/0`, else `sparse`, else `path`).
+    background: [3] colour that images with an alpha channel are composited on.
+
+  Returns:
+    (views, points): `Views` (images [V, H, W, 3] float32 in [0, 1], alphas when the images
+    have them, cameras in OpenCV axes, names = image names without extension) ordered by
+    image name, and the model's `PointCloud` ordered by point id.
+
+  Raises:
+    FileNotFoundError: a missing folder, model file or image (named in the message).
+    DatasetError (a ValueError): a distorted or non-perspective camera (named, with how to
+      undistort), unreadable model files, images of different sizes, images whose size is not
+      a scaled copy of the camera's, non-finite poses.
+  """
+  root = _io.require_dir(path, "COLMAP scene folder")
+  if isinstance(factor, bool) or not isinstance(factor, (int, np.integer)) or factor < 1:
+    raise ValueError(f"factor must be an integer >= 1, got {factor!r}")
+  bg = np.asarray(background, np.float32)
+  if bg.shape != (3,) or not np.all(np.isfinite(bg)):
+    raise ValueError(f"background must be 3 finite numbers, got {background!r}")
+  sparse = find_sparse(root) if sparse is None else Path(sparse)
+  recon = read_reconstruction(sparse)
+  image_dir = root / ("images" if factor == 1 else f"images_{int(factor)}")
+  if not image_dir.is_dir():
+    found = sorted(p.name for p in root.glob("images*") if p.is_dir())
+    raise FileNotFoundError(f"image folder for factor={factor} not found: {image_dir} (image "
+                            f"folders in {root}: {', '.join(found) or 'none'}).")
+
+  entries = sorted(((im.name, im) for im in recon.images.values() if _has_pose(im)),
+                   key=lambda e: e[0])
+  if not entries:
+    raise _io.DatasetError(f"{sparse}: the model has no posed images.")
+  intrinsics = {}
+  images, alphas, w2cs, ks, names = [], [], [], [], []
+  size = None
+  for name, image in entries:
+    if image.camera_id not in intrinsics:
+      intrinsics[image.camera_id] = _pinhole(recon.cameras[image.camera_id], sparse, name)
+    (fx, fy, cx, cy), (cam_w, cam_h) = intrinsics[image.camera_id]
+    file = _image_file(image_dir, name)
+    color, alpha = _io.read_image(file)
+    if size is None:
+      size = color.shape[:2]
+    elif color.shape[:2] != size:
+      raise _io.DatasetError(f"{file}: image is {color.shape[1]}x{color.shape[0]} but "
+                             f"{entries[0][0]} is {size[1]}x{size[0]}; all images must share "
+                             "one size.")
+    sx, sy = color.shape[1] / cam_w, color.shape[0] / cam_h
+    # A resized copy keeps the aspect ratio up to rounding (or flooring) each side to whole
+    # pixels: one of the two scales then reproduces the other side within 2 pixels.
+    if min(cam_w, cam_h) * abs(sx - sy) > 2.0:
+      raise _io.DatasetError(
+          f"{file}: image is {color.shape[1]}x{color.shape[0]}, not a scaled copy of the "
+          f"{cam_w}x{cam_h} that camera {image.camera_id} of {sparse} was calibrated for.")
+    where = f"{sparse} image {name!r}"
+    w2c = _io.validate_rigid(_pose_matrix(image), where)
+    if alpha is not None:
+      color = color * alpha[..., None] + (1.0 - alpha[..., None]) * bg
+    images.append(color)
+    alphas.append(alpha)
+    w2cs.append(w2c)
+    ks.append((fx * sx, fy * sy, cx * sx, cy * sy))
+    names.append(str(Path(name).with_suffix("")))
+
+  alpha_arr = None
+  if any(a is not None for a in alphas):
+    alpha_arr = np.stack([np.ones(size, np.float32) if a is None else a for a in alphas])
+  ks = np.asarray(ks, np.float64)
+  cameras = Camera.create(np.stack(w2cs).astype(np.float32), ks[:, 0].astype(np.float32),
+                          ks[:, 1].astype(np.float32), ks[:, 2].astype(np.float32),
+                          ks[:, 3].astype(np.float32), size[1], size[0])
+  views = Views(images=np.clip(np.stack(images), 0.0, 1.0).astype(np.float32), cameras=cameras,
+                alphas=alpha_arr, names=tuple(names))
+  return views, points_of(recon)
+
+
+def points_of(recon):
+  """The `PointCloud` of a `pycolmap.Reconstruction`, ordered by point id."""
+  ids = sorted(recon.points3D)
+  xyz = np.array([recon.points3D[i].xyz for i in ids], np.float64).reshape(-1, 3)
+  rgb = np.array([recon.points3D[i].color for i in ids], np.float64).reshape(-1, 3)
+  if not np.all(np.isfinite(xyz)):
+    raise _io.DatasetError("the COLMAP model has non-finite 3D points.")
+  return PointCloud(xyz.astype(np.float32), (rgb / 255.0).astype(np.float32))
+
+
+def _has_pose(image):
+  has_pose = getattr(image, "has_pose", True)
+  return has_pose() if callable(has_pose) else bool(has_pose)
+
+
+def _pose_matrix(image):
+  """[3, 4] cam_from_world of a pycolmap image (a method since pycolmap 3.12, a property
+  before)."""
+  pose = image.cam_from_world
+  pose = pose() if callable(pose) else pose
+  return np.asarray(pose.matrix(), np.float64)
+
+
+def _pinhole(camera, sparse, image_name):
+  """((fx, fy, cx, cy), (width, height)) of a pinhole-type camera; DatasetError otherwise."""
+  model = str(getattr(camera, "model_name", None) or camera.model.name)
+  params = np.asarray(camera.params, np.float64)
+  where = f"{sparse}: camera {camera.camera_id} (used by image {image_name!r})"
+  lead = _PINHOLE_MODELS.get(model, _ZERO_DISTORTION_MODELS.get(model))
+  if lead is None:
+    raise _io.DatasetError(f"{where} has the camera model {model}, which the pinhole renderer "
+                           f"cannot reproduce; {_UNDISTORT_HINT}.")
+  if model in _ZERO_DISTORTION_MODELS and np.any(params[lead:] != 0.0):
+    raise _io.DatasetError(
+        f"{where} has the distorted camera model {model} (distortion parameters "
+        f"{params[lead:].tolist()}); {_UNDISTORT_HINT}.")
+  if lead == 3:  # a single focal length
+    f, cx, cy = params[:3]
+    fx = fy = f
+  else:
+    fx, fy, cx, cy = params[:4]
+  values = np.array([fx, fy, cx, cy])
+  if not np.all(np.isfinite(values)) or fx <= 0 or fy <= 0:
+    raise _io.DatasetError(f"{where}: invalid intrinsics fx={fx}, fy={fy}, cx={cx}, cy={cy}.")
+  return (float(fx), float(fy), float(cx), float(cy)), (int(camera.width), int(camera.height))
+
+
+def _image_file(image_dir, name):
+  """The file of image `name` in `image_dir`: the name itself, else the same stem with another
+  image extension (downscaled folders are often written as PNG)."""
+  path = image_dir / name
+  if path.is_file():
+    return path
+  stem = path.with_suffix("")
+  for candidate in sorted(stem.parent.glob(stem.name + ".*")) if stem.parent.is_dir() else []:
+    if candidate.suffix.lower() in _io.IMAGE_SUFFIXES:
+      return candidate
+  raise FileNotFoundError(f"image of the COLMAP model not found: {path} (nor "
+                          f"{stem.name} with another image extension).")
+
+
+# ------------------------------------------------------------------------- export
+
+
+def export_colmap(path, views: Views, points: PointCloud | None = None, *, binary=True,
+                  overwrite=False):
+  """Writes `views` (and `points`) as a COLMAP capture that `load_colmap` and 3DGS tools read.
+
+  Writes `path/images/{index:05d}_{name}.png` (8-bit RGB; the index keeps the view order
+  when sorted by name) and `path/sparse/0/` with pycolmap's writer: one PINHOLE camera per
+  distinct set of intrinsics, one posed image per view, and the points with their colours
+  (no tracks). `load_colmap(path)` returns the same cameras (float32 round trip), the images
+  quantised to 8 bits, and the points.
+
+  Args:
+    path: output folder (created if needed).
+    views: the views to write.
+    points: optional `PointCloud`.
+    binary: write .bin files (COLMAP's default) instead of .txt.
+    overwrite: replace an existing sparse model (otherwise FileExistsError).
+
+  Returns:
+    the sparse model folder.
+  """
+  import imageio.v3 as iio
+
+  pycolmap = _pycolmap()
+  root = Path(path)
+  sparse = root / "sparse" / "0"
+  if any(sparse.glob("cameras.*")) and not overwrite:
+    raise FileExistsError(f"{sparse} holds a model; pass overwrite=True to replace it.")
+  images = np.asarray(views.images, np.float32)
+  cameras = views.cameras
+  if images.ndim != 4 or images.shape[-1] != 3 or cameras.batch_shape != (len(images),):
+    raise ValueError(f"views must hold [V, H, W, 3] images and V cameras, got images "
+                     f"{images.shape} and cameras {cameras.batch_shape}")
+  (root / "images").mkdir(parents=True, exist_ok=True)
+  sparse.mkdir(parents=True, exist_ok=True)
+  recon = pycolmap.Reconstruction()
+  w2c = np.asarray(cameras.world_to_camera, np.float64)
+  ks = np.stack([np.asarray(getattr(cameras, k), np.float64) for k in ("fx", "fy", "cx", "cy")],
+                axis=-1)
+  camera_ids = {}
+  for i in range(len(images)):
+    key = tuple(ks[i].tolist())
+    if key not in camera_ids:
+      camera_ids[key] = len(camera_ids) + 1
+      recon.add_camera_with_trivial_rig(pycolmap.Camera(
+          camera_id=camera_ids[key], model="PINHOLE", width=int(cameras.width),
+          height=int(cameras.height), params=list(key)))
+    stem = f"{i:05d}"
+    if views.names:
+      stem += "_" + "".join(c if c.isalnum() or c in "-_." else "_" for c in str(views.names[i]))
+    name = f"{stem}.png"
+    iio.imwrite(root / "images" / name,
+                np.round(np.clip(images[i], 0.0, 1.0) * 255.0).astype(np.uint8))
+    image = pycolmap.Image(name=name, camera_id=camera_ids[key], image_id=i + 1)
+    pose = pycolmap.Rigid3d(pycolmap.Rotation3d(w2c[i, :3, :3]), w2c[i, :3, 3])
+    recon.add_image_with_trivial_frame(image, pose)
+  if points is not None:
+    rgb = np.round(np.clip(np.asarray(points.rgb, np.float64), 0.0, 1.0) * 255.0)
+    for xyz, color in zip(np.asarray(points.xyz, np.float64), rgb.astype(np.uint8),
+                          strict=True):
+      recon.add_point3D(xyz, pycolmap.Track(), color)
+  for old in sparse.iterdir():
+    if old.suffix in (".bin", ".txt"):
+      old.unlink()
+  (recon.write_binary if binary else recon.write_text)(str(sparse))
+  return sparse

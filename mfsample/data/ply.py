@@ -1,0 +1,235 @@
+"""3DGS models as `.ply` files: the standard `point_cloud.ply`, read and written with `plyfile`.
+
+The layout of the reference implementation (Kerbl et al. 2023), which other 3DGS tools and
+splat viewers read and write: one binary `vertex` element, one row per Gaussian, float
+properties
+
+  x y z  nx ny nz  f_dc_0..2  f_rest_0..(3 (K - 1) - 1)  opacity  scale_0..2  rot_0..3
+
+holding *raw* values: opacity is a logit, scales are natural logs, `rot` an unnormalised
+(w, x, y, z) quaternion, colours SH coefficients (K = (degree + 1)^2, the colour is
+SH(d) + 0.5) with `f_rest` channel-major (all red coefficients of bands >= 1, then green, then
+blue). Normals are unused (written as zeros). These are exactly the raw groups of
+`mfsample.model` (`means`, `sh_dc`, `sh_rest`, `opacity_logits`, `log_scales`, `quats`), so
+a file becomes a model's mean without any conversion.
+
+Reading accepts any SH degree 0-3 (told by the number of `f_rest_*` properties), properties
+in any order and of any float type, big- or little-endian data, and ignores properties it does
+not use (normals, colours of point-cloud tools, extra per-Gaussian data). It refuses, naming
+the file and the property: missing properties, an `f_rest` count that is no SH degree,
+non-finite values, truncated data, and ASCII files (3DGS tools write binary; an ASCII file of
+a real model is gigabytes of text, and far more often a mesh or point cloud saved by mistake).
+"""
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from mfsample.data._io import DatasetError, require_file
+
+# Properties every 3DGS file has, grouped as the model's raw parameters.
+_COLUMNS = {
+    "means": ("x", "y", "z"),
+    "sh_dc": ("f_dc_0", "f_dc_1", "f_dc_2"),
+    "opacity_logits": ("opacity",),
+    "log_scales": ("scale_0", "scale_1", "scale_2"),
+    "quats": ("rot_0", "rot_1", "rot_2", "rot_3"),
+}
+# Number of f_rest properties -> SH degree: 3 channels x ((degree + 1)^2 - 1) coefficients.
+_REST_COUNT = {3 * ((d + 1) ** 2 - 1): d for d in range(4)}
+
+
+def _plyfile():
+  try:
+    import plyfile
+  except ImportError as err:  # a core dependency; the message helps a broken environment
+    raise ImportError("reading and writing .ply files needs plyfile (pip install plyfile)") \
+        from err
+  return plyfile
+
+
+# ------------------------------------------------------------------------- writing
+
+
+def ply_arrays(mean, mask=None):
+  """{property name: [N] float32} of the live rows of raw parameters `mean`, in file order.
+
+  Args:
+    mean: {group: [C, ...]} raw parameters (`Model.params.mean`).
+    mask: optional [C] bool; only rows where it is True are written.
+  """
+  mean = {g: np.asarray(v, np.float32) for g, v in mean.items()}
+  live = np.ones(len(mean["means"]), bool) if mask is None else np.asarray(mask, bool)
+  n = int(live.sum())
+  out = {}
+  for i, axis in enumerate("xyz"):
+    out[axis] = mean["means"][live, i]
+  for axis in ("nx", "ny", "nz"):
+    out[axis] = np.zeros(n, np.float32)
+  for c in range(3):
+    out[f"f_dc_{c}"] = mean["sh_dc"][live, c]
+  if "sh_rest" in mean:  # [N, K - 1, 3] -> channel-major [N, 3 (K - 1)]
+    rest = np.transpose(mean["sh_rest"][live], (0, 2, 1)).reshape(n, -1)
+    for j in range(rest.shape[1]):
+      out[f"f_rest_{j}"] = rest[:, j]
+  out["opacity"] = mean["opacity_logits"][live]
+  for i in range(3):
+    out[f"scale_{i}"] = mean["log_scales"][live, i]
+  for i in range(4):
+    out[f"rot_{i}"] = mean["quats"][live, i]
+  return out
+
+
+def write_ply(path, arrays):
+  """Writes {name: [N] array} as the float32 properties of a binary little-endian `vertex`
+  element (in the dict's order); the file is replaced atomically."""
+  plyfile = _plyfile()
+  names = list(arrays)
+  n = len(arrays[names[0]])
+  table = np.empty(n, dtype=[(name, "<f4") for name in names])
+  for name in names:
+    table[name] = arrays[name]
+  path = Path(path)
+  tmp = path.with_name(path.name + ".tmp")
+  plyfile.PlyData([plyfile.PlyElement.describe(table, "vertex")], byte_order="<").write(str(tmp))
+  os.replace(tmp, path)
+  return path
+
+
+def export_ply(path, model):
+  """Writes the mean of `model` (live Gaussians only) to `path` in the 3DGS layout."""
+  return write_ply(path, ply_arrays(model.params.mean, model.mask))
+
+
+def raw_from_gaussians(gaussians):
+  """{group: [N, ...] float32} raw parameters of activated `Gaussians` (live rows only).
+
+  The inverse of `mfsample.model.activate`: log-scales, opacity logits (opacities clipped to
+  [1e-6, 1 - 1e-6] first, so both stay finite), quaternions and SH coefficients as they are.
+  """
+  live = (np.ones(gaussians.means.shape[0], bool) if gaussians.mask is None
+          else np.asarray(gaussians.mask, bool))
+  opacity = np.clip(np.asarray(gaussians.opacities, np.float64)[live], 1e-6, 1.0 - 1e-6)
+  sh = np.asarray(gaussians.sh, np.float32)[live]
+  raw = {"means": np.asarray(gaussians.means, np.float32)[live],
+         "log_scales": np.log(np.asarray(gaussians.scales, np.float64)[live]),
+         "quats": np.asarray(gaussians.quats, np.float32)[live],
+         "opacity_logits": np.log(opacity) - np.log1p(-opacity),
+         "sh_dc": sh[:, 0]}
+  if sh.shape[1] > 1:
+    raw["sh_rest"] = sh[:, 1:]
+  return {g: np.asarray(v, np.float32) for g, v in raw.items()}
+
+
+def export_gaussians(path, gaussians):
+  """Writes activated `Gaussians` (e.g. `mfsample.testing.random_gaussians`) as a 3DGS file."""
+  return write_ply(path, ply_arrays(raw_from_gaussians(gaussians)))
+
+
+# ------------------------------------------------------------------------- reading
+
+
+def read_vertex_table(path):
+  """The `vertex` element of a binary PLY file as a numpy structured array.
+
+  Raises:
+    FileNotFoundError: no file at `path`.
+    DatasetError: not a PLY file, ASCII format, no `vertex` element, list properties or
+      truncated data (the message names the file, and the row and property where known).
+  """
+  path = require_file(path, ".ply file")
+  plyfile = _plyfile()
+  try:
+    # mmap=False: the data is copied (memory maps of a file stay open), and a truncated
+    # file is reported with the row and property where the data ends.
+    data = plyfile.PlyData.read(str(path), mmap=False)
+  except plyfile.PlyHeaderParseError as e:
+    raise DatasetError(f"{path}: not a valid PLY header ({e}).") from e
+  except plyfile.PlyElementParseError as e:
+    raise DatasetError(f"{path}: truncated or malformed data: {e}.") from e
+  except (UnicodeDecodeError, ValueError) as e:
+    raise DatasetError(f"{path}: cannot be read as a PLY file ({e}).") from e
+  if data.text:
+    raise DatasetError(
+        f"{path}: ASCII PLY; 3DGS models are binary little-endian files. Convert it with "
+        "plyfile: d = plyfile.PlyData.read(src); d.text = False; d.byte_order = '<'; "
+        "d.write(dst).")
+  names = [e.name for e in data.elements]
+  if "vertex" not in names:
+    raise DatasetError(f"{path}: no 'vertex' element (elements: {', '.join(names) or 'none'}).")
+  vertex = data["vertex"]
+  lists = [p.name for p in vertex.properties if isinstance(p, plyfile.PlyListProperty)]
+  if lists:
+    raise DatasetError(f"{path}: vertex property {lists[0]!r} is a list; a 3DGS file has "
+                       "scalar properties only.")
+  return vertex.data
+
+
+def load_ply(path):
+  """The raw parameters of a 3DGS `.ply` file (see the module docstring for the layout).
+
+  Args:
+    path: a `point_cloud.ply` written by the 3DGS reference code, gsplat, nerfstudio's
+      splatfacto export, `export_ply`, or any tool using the same layout.
+
+  Returns:
+    {group: float32 numpy array}: `means` [N, 3], `log_scales` [N, 3], `quats` [N, 4],
+    `opacity_logits` [N], `sh_dc` [N, 3] and, for SH degree > 0, `sh_rest` [N, K - 1, 3]
+    (K = (degree + 1)^2), exactly as stored (the model's raw groups: `init_model`'s mean,
+    `mfsample.model.model_from_mean`).
+
+  Raises:
+    FileNotFoundError: no file at `path`.
+    DatasetError: the problems listed in the module docstring, naming the file and the
+      property.
+  """
+  table = read_vertex_table(path)
+  present = set(table.dtype.names)
+  for group, columns in _COLUMNS.items():
+    missing = [c for c in columns if c not in present]
+    if missing:
+      raise DatasetError(f"{path}: missing vertex propert{'ies' if len(missing) > 1 else 'y'} "
+                         f"{', '.join(missing)} (the 3DGS layout needs {', '.join(columns)} for "
+                         f"{group}).")
+  n = len(table)
+  if n == 0:
+    raise DatasetError(f"{path}: the vertex element has no rows (no Gaussians).")
+  out = {group: _stack(table, columns, path) for group, columns in _COLUMNS.items()}
+  out["opacity_logits"] = out["opacity_logits"][:, 0]
+  rest = sorted((p for p in present if p.startswith("f_rest_")), key=lambda p: (len(p), p))
+  if rest:
+    if len(rest) not in _REST_COUNT:
+      raise DatasetError(f"{path}: {len(rest)} f_rest_* properties; an SH degree of 1, 2 or 3 "
+                         f"has {', '.join(str(c) for c in sorted(_REST_COUNT)[1:])}.")
+    expected = [f"f_rest_{j}" for j in range(len(rest))]
+    missing = [p for p in expected if p not in present]
+    if missing:
+      raise DatasetError(f"{path}: missing vertex property {missing[0]} (f_rest_* must be "
+                         f"numbered 0..{len(rest) - 1}).")
+    values = _stack(table, expected, path)  # channel-major: [N, 3, K - 1]
+    out["sh_rest"] = np.ascontiguousarray(
+        np.transpose(values.reshape(n, 3, len(rest) // 3), (0, 2, 1)))
+  return out
+
+
+def sh_degree_of(mean):
+  """SH degree of raw parameters `mean` (0 without `sh_rest`)."""
+  rest = mean.get("sh_rest")
+  return 0 if rest is None else int(round(np.sqrt(rest.shape[1] + 1))) - 1
+
+
+def _stack(table, columns, path):
+  """[N, len(columns)] float32 from named columns; DatasetError naming a bad one."""
+  out = np.empty((len(table), len(columns)), np.float32)
+  for j, name in enumerate(columns):
+    column = table[name]
+    if not np.issubdtype(column.dtype, np.floating):
+      raise DatasetError(f"{path}: vertex property {name} has type {column.dtype}; 3DGS "
+                         "stores floats.")
+    out[:, j] = column
+    bad = ~np.isfinite(out[:, j])
+    if np.any(bad):
+      raise DatasetError(f"{path}: vertex property {name} is not finite in row "
+                         f"{int(np.argmax(bad))} ({int(bad.sum())} rows in all).")
+  return out

@@ -1,0 +1,66 @@
+"""The config of `run_uncertainty`: uncertainty maps and next views for a dataset or a .ply.
+
+`default_config()` is a training config (`mfsample.train.default_config()`: the dataset, the
+model, B_hat, the loss, the optimiser, densification and the render budget, each field with
+its comment there) with the job's defaults below, plus three blocks of its own: `posthoc`
+(bring a trained 3DGS model), `views` (which views train, which are candidates) and
+`next_views` (how candidates are scored). The default runs the built-in Mitsuba scene at
+64 x 64: a field trained 2000 steps on every 4th of its 100 candidate views, the other 75
+ranked by U (about 5 minutes of CPU time). `configs/uncertainty.py`
+selects variants; any field is overridden on the command line, e.g.
+`--config.data.kind=colmap --config.data.path=~/captures/garden --config.data.downscale=8`.
+"""
+
+import ml_collections
+
+from mfsample.train.config import default_config as training_config
+
+
+def default_config():
+  """The uncertainty job's `ml_collections.ConfigDict` (see the comment on each field)."""
+  config = training_config()
+
+  # ----------------------------------------------------------------- training defaults
+  # The built-in scene at the planning pool's size (its captures are shared with it).
+  config.data.width = 64
+  config.data.height = 64
+  config.data.num_test = 40
+  config.model.sh_degree = 1  # Three SH degree steps would need more than 2000 steps.
+  config.model.init_points = 3_000  # Random initial points in the scene box.
+  config.model.max_gaussians = 20_000
+  config.train.num_steps = 2_000  # Joint training (no .ply): 3DGS's schedule compressed ...
+  config.densify.stop = 1_500  # ... densifying from step 500 to 1500, and ...
+  config.sampler.stochastic_until = None  # ... a sample rendered at every step (the paper).
+  config.eval.lpips_net = ""  # Test PSNR / SSIM only ("vgg16": LPIPS too, slow on a CPU).
+  config.eval.save_images = 8  # Test views whose render and U map are written as PNG.
+  config.render.max_intersections = 1 << 15  # Initial budget (grown on overflow).
+
+  # ----------------------------------------------------------------- a pretrained model
+  config.posthoc = posthoc = ml_collections.ConfigDict()  # Bring a trained 3DGS model.
+  # A 3DGS point_cloud.ply (relative: to the cwd). Set: B_hat is fitted with its Gaussians
+  # frozen (mfsample.train.posthoc) instead of training a field; data.* must then be the
+  # capture it was trained on. "": train a stochastic field jointly on the views.
+  posthoc.ply = ""
+  # Steps of the B_hat fit (the paper's loss with its volume term); each costs one training
+  # step. train.num_steps is the joint training's length and is not used then.
+  posthoc.steps = 1_000
+
+  # ----------------------------------------------------------------- views
+  config.views = views = ml_collections.ConfigDict()  # Which views train, which are candidates.
+  # Train (or fit B_hat) on every n-th view of the dataset's training split, from the first;
+  # the others are the "unused" candidates. 1: all (then use next_views.candidates="sphere").
+  views.train_every = 4
+
+  # ----------------------------------------------------------------- next views
+  config.next_views = nv = ml_collections.ConfigDict()  # Ranking candidate views by U.
+  # "unused": the training split's views left out by views.train_every (their images give
+  # the rank correlation of U with the model's error there); "sphere": new poses on a
+  # sphere around the scene, oriented by the training cameras (no images, U only).
+  nv.candidates = "unused"
+  nv.k = 5  # How many next views to propose (the top k by U).
+  nv.samples = 8  # M of U for the ranking (the planning configs': 8; the paper's: 2).
+  nv.z_seed = 6174  # Sobol scrambling seed of U's samples (authors' code: 6174).
+  nv.score_downscale = 1  # Candidates are scored at 1 / this of the image size.
+  nv.sphere_views = 100  # candidates "sphere": how many poses (a Fibonacci spiral).
+  nv.figure = True  # Write next_views.png (candidates by U, top k, test U maps).
+  return config

@@ -1,0 +1,178 @@
+"""Tests of mfsample.data.ply: the standard 3DGS layout through plyfile, both ways."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import plyfile
+import pytest
+
+from mfsample.data import DatasetError
+from mfsample.data.ply import (
+                               export_gaussians,
+                               export_ply,
+                               load_ply,
+                               ply_arrays,
+                               sh_degree_of,
+)
+from mfsample.model import GROUPS, SamplerSpec, init_model, mean_gaussians, model_from_mean
+from mfsample.renderer import RenderSettings, render
+from mfsample.testing import orbit_camera, random_gaussians
+
+SPEC = SamplerSpec(kind="lowrank", rank=2, groups=("means",), bounds=(("means", 1.0),))
+SCALES = {g: 1e-3 for g in GROUPS}
+
+
+def _model(sh_degree, n=5):
+  rng = np.random.default_rng(sh_degree)
+  model = init_model(jax.random.PRNGKey(0), rng.uniform(-1, 1, (n, 3)), spec=SPEC,
+                     sh_degree=sh_degree, init_scales=SCALES, capacity=n + 3)
+  mean = dict(model.params.mean)
+  # Distinct, non-trivial values everywhere (the initial model has zero SH rest and
+  # identical opacities), so any mix-up of properties or of the f_rest order shows.
+  for g in mean:
+    if g != "means":
+      live = rng.normal(size=(n,) + mean[g].shape[1:]).astype(np.float32)
+      mean[g] = mean[g].at[:n].set(live)
+  return model.replace(params=model.params._replace(mean=mean))
+
+
+def _write(path, columns, text=False, byte_order="<"):
+  """A PLY vertex element from {name: array}, each with its own numpy dtype."""
+  n = len(next(iter(columns.values())))
+  table = np.empty(n, dtype=[(k, np.asarray(v).dtype) for k, v in columns.items()])
+  for k, v in columns.items():
+    table[k] = v
+  plyfile.PlyData([plyfile.PlyElement.describe(table, "vertex")], text=text,
+                  byte_order=byte_order).write(str(path))
+  return path
+
+
+def test_layout_is_the_reference_one(tmp_path):
+  path = tmp_path / "model.ply"
+  export_ply(path, _model(sh_degree=3))
+  header = path.read_bytes().split(b"end_header")[0].decode()
+  names = [line.split()[-1] for line in header.splitlines() if line.startswith("property")]
+  assert names == (["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"]
+                   + [f"f_rest_{i}" for i in range(45)] + ["opacity"]
+                   + [f"scale_{i}" for i in range(3)] + [f"rot_{i}" for i in range(4)])
+  assert "format binary_little_endian 1.0" in header and "element vertex 5" in header
+  assert all(line.split()[1] == "float" for line in header.splitlines()
+             if line.startswith("property"))
+
+
+@pytest.mark.parametrize("sh_degree", [0, 1, 3])
+def test_export_import_round_trip_is_exact(tmp_path, sh_degree):
+  model = _model(sh_degree)
+  path = tmp_path / "model.ply"
+  export_ply(path, model)
+  mean = load_ply(path)
+  live = {g: np.asarray(v)[:5] for g, v in model.params.mean.items()}  # the padding is not written
+  assert set(mean) == set(live) and sh_degree_of(mean) == sh_degree
+  for g in live:
+    np.testing.assert_array_equal(mean[g], live[g], err_msg=g)
+    assert mean[g].dtype == np.float32
+
+
+def test_reads_the_reference_meaning_of_each_property(tmp_path):
+  """A file written by hand (not by export_ply), SH degree 1, big-endian doubles, the
+  properties shuffled and extra ones (colours, normals, a filter) beside them."""
+  n = 3
+  rng = np.random.default_rng(1)
+  cols = {f"f_rest_{j}": rng.normal(size=n) for j in range(9)}
+  cols.update({"scale_2": [-1.0, -2.0, -3.0], "x": [0.1, 0.2, 0.3], "y": [1.0, 2.0, 3.0],
+               "z": [-1.0, -2.0, -3.0], "red": np.array([1, 2, 3], np.uint8),
+               "opacity": [0.5, -0.5, 2.0], "f_dc_0": [0.1, 0.2, 0.3],
+               "f_dc_1": [0.4, 0.5, 0.6], "f_dc_2": [0.7, 0.8, 0.9], "nx": np.zeros(n),
+               "scale_0": [-4.0, -5.0, -6.0], "scale_1": [-7.0, -8.0, -9.0],
+               "rot_0": [1.0, 0.0, 2.0], "rot_1": [0.0, 1.0, 0.0], "rot_2": [0.0, 0.0, 0.0],
+               "rot_3": [0.0, 0.0, 1.0], "filter_3D": [0.01, 0.02, 0.03]})
+  cols = {k: (np.asarray(v, ">f8") if np.asarray(v).dtype.kind == "f" else np.asarray(v))
+          for k, v in cols.items()}
+  mean = load_ply(_write(tmp_path / "hand.ply", cols, byte_order=">"))
+  np.testing.assert_allclose(mean["means"][1], [0.2, 2.0, -2.0], rtol=1e-7)
+  np.testing.assert_allclose(mean["log_scales"][2], [-6.0, -9.0, -3.0])
+  np.testing.assert_allclose(mean["quats"][2], [2.0, 0.0, 0.0, 1.0])  # rot_0 is w
+  np.testing.assert_allclose(mean["opacity_logits"], [0.5, -0.5, 2.0])  # raw logits
+  np.testing.assert_allclose(mean["sh_dc"][0], [0.1, 0.4, 0.7], rtol=1e-6)
+  # f_rest is channel-major: f_rest_0..2 are red's three band-1 coefficients, 3..5 green's.
+  assert mean["sh_rest"].shape == (n, 3, 3)
+  np.testing.assert_allclose(mean["sh_rest"][:, :, 0], np.stack(
+      [cols[f"f_rest_{j}"] for j in range(3)], 1), rtol=1e-6)
+  np.testing.assert_allclose(mean["sh_rest"][:, 1, 2], cols["f_rest_7"], rtol=1e-6)
+
+
+def test_a_loaded_model_renders_as_its_gaussians(tmp_path):
+  model = _model(sh_degree=1, n=40)
+  path = tmp_path / "model.ply"
+  export_ply(path, model)
+  loaded = model_from_mean(jax.random.PRNGKey(3), load_ply(path), spec=SPEC,
+                           init_scales=SCALES, capacity=model.capacity)  # one compilation
+  assert int(loaded.sh_degree) == 1 and loaded.num_live == 40  # every band active
+  camera = orbit_camera(24, 20)
+  settings = RenderSettings(max_intersections=1 << 12)
+  want = render(mean_gaussians(model.replace(sh_degree=jnp.int32(1))), camera,
+                settings=settings)
+  got = render(mean_gaussians(loaded), camera, settings=settings)
+  assert not bool(got.stats.overflow)
+  np.testing.assert_array_equal(np.asarray(got.rgb), np.asarray(want.rgb))
+
+
+def _reference_columns(n=2, rest=0):
+  names = (["x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2"] + [f"f_rest_{j}" for j in range(rest)]
+           + ["opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"])
+  return {k: np.ones(n, np.float32) for k in names}
+
+
+def test_malformed_files_are_refused_naming_file_and_property(tmp_path):
+  cols = _reference_columns()
+  del cols["scale_1"]
+  path = _write(tmp_path / "missing.ply", cols)
+  with pytest.raises(DatasetError, match=r"missing\.ply: missing vertex property scale_1"):
+    load_ply(path)
+
+  path = _write(tmp_path / "ascii.ply", _reference_columns(), text=True)
+  with pytest.raises(DatasetError, match=r"ascii\.ply: ASCII PLY"):
+    load_ply(path)
+
+  good = tmp_path / "good.ply"
+  write = _write(good, _reference_columns(n=4))
+  (tmp_path / "cut.ply").write_bytes(write.read_bytes()[:-6])
+  with pytest.raises(DatasetError, match=r"cut\.ply: truncated.*row 3.*property 'rot_2'"):
+    load_ply(tmp_path / "cut.ply")
+
+  cols = _reference_columns(rest=7)
+  with pytest.raises(DatasetError, match=r"odd\.ply: 7 f_rest_\* properties"):
+    load_ply(_write(tmp_path / "odd.ply", cols))
+  cols = _reference_columns(rest=9)
+  cols["f_rest_9"] = cols.pop("f_rest_4")
+  with pytest.raises(DatasetError, match=r"gap\.ply: missing vertex property f_rest_4"):
+    load_ply(_write(tmp_path / "gap.ply", cols))
+
+  cols = _reference_columns(n=3)
+  cols["opacity"][2] = np.nan
+  with pytest.raises(DatasetError, match=r"nan\.ply: vertex property opacity is not finite "
+                     "in row 2"):
+    load_ply(_write(tmp_path / "nan.ply", cols))
+
+  (tmp_path / "text.ply").write_text("hello\n")
+  with pytest.raises(DatasetError, match=r"text\.ply: not a valid PLY header"):
+    load_ply(tmp_path / "text.ply")
+  with pytest.raises(FileNotFoundError, match="nothere.ply"):
+    load_ply(tmp_path / "nothere.ply")
+
+
+def test_ply_arrays_write_live_rows_only():
+  model = _model(sh_degree=0)
+  arrays = ply_arrays(model.params.mean, model.mask)
+  assert len(arrays["x"]) == 5 and "f_rest_0" not in arrays
+
+
+def test_gaussians_round_trip_through_raw_parameters(tmp_path):
+  gaussians = random_gaussians(30, sh_degree=2, seed=4)
+  path = export_gaussians(tmp_path / "g.ply", gaussians)
+  model = model_from_mean(jax.random.PRNGKey(0), load_ply(path), spec=SPEC, init_scales=SCALES)
+  back = mean_gaussians(model)
+  for name in ("means", "scales", "quats", "opacities", "sh"):
+    np.testing.assert_allclose(np.asarray(getattr(back, name))[:30],
+                               np.asarray(getattr(gaussians, name)), rtol=2e-6, atol=1e-7,
+                               err_msg=name)
