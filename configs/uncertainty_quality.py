@@ -8,6 +8,8 @@ Variants combine, comma-separated:
               main job's pool; round lengths 150, 400, 600; M = 2 and 8; seeds 0 and 1).
   lego        with candidates: NeRF Synthetic lego's pool (`configs/camera_planning.py:lego`;
               point `--config.candidates.planning.data.path` at the scene folder).
+  posthoc     the jointly trained rank-2 field against B_hat fitted post hoc (400 steps) to
+              the deterministic model of the same views and seed (`ause.baselines`).
   tiny        both parts at a tiny size: random ground-truth Gaussians at 24 x 24.
 
 Everything else is an override, e.g. `--config.ause.samplers="('lowrank:2','diagonal')"`
@@ -38,6 +40,14 @@ def lego(config):
   """The candidates part on lego's fixed pool (its 100 training views, rounds at 40 x 40)."""
   candidates(config)
   camera_planning.lego(config.candidates.planning)
+
+
+def posthoc(config):
+  """Ours, rank 2, trained jointly against post-hoc: B_hat fitted to the deterministic model
+  with its mean frozen (`ause.posthoc_sampler`, `ause.posthoc_steps`); the protocol as the
+  default otherwise."""
+  config.ause.samplers = ("lowrank:2",)
+  config.ause.baselines = ("posthoc",)
 
 
 def tiny(config):
@@ -74,4 +84,4 @@ def tiny(config):
   c.views = (1, 2)
 
 
-VARIANTS = {f.__name__: f for f in (candidates, lego, tiny)}
+VARIANTS = {f.__name__: f for f in (candidates, lego, posthoc, tiny)}

@@ -89,6 +89,9 @@ def test_sampler_flags_and_labels():
     ("data.spp", 10, "config.data.spp = 10: must be a perfect square"),
     ("train.densify.start", 10, "config.train.densify.start = 10"),
     ("figures.test_view", 4, r"config.figures.test_view = 4: must be an integer in \[0, 3\]"),
+    ("ause.baselines", ("posthoc", "nope"), "config.ause.baselines: 'nope' is not one of"),
+    ("ause.posthoc_sampler", "deterministic", "config.ause.posthoc_sampler: sampler"),
+    ("ause.posthoc_steps", 0, "config.ause.posthoc_steps = 0: must be an integer >= 1"),
 ])
 def test_bad_configs_are_refused_naming_the_field(field, value, message):
   config = uncertainty_quality.get_config()
@@ -154,3 +157,46 @@ def test_tiny_experiment_resumes_and_refuses_another_protocol(tiny_run, monkeypa
   with pytest.raises(ValueError, match="different config.*mask.model_alpha_min"):
     run_uncertainty_quality(changed, str(workdir))
   assert math.isfinite(again["seconds_this_call"])
+
+
+@pytest.mark.slow
+def test_posthoc_baseline_keeps_the_mean_and_scores_its_maps(tmp_path, monkeypatch):
+  # The deterministic model of the tiny run (the same training compilation), B_hat fitted to
+  # it post hoc; the fitted field is caught on its way to the maps.
+  config = uncertainty_quality.get_config("tiny")
+  config.candidates.enabled = False
+  config.figures.enabled = False
+  config.ause.samplers = ()
+  config.ause.baselines = ("posthoc",)
+  config.ause.posthoc_steps = 20
+  fits = []
+
+  def spy(config, model, *args, **kwargs):
+    fit = fit_posthoc(config, model, *args, **kwargs)
+    fits.append((model, fit.state.model))
+    return fit
+
+  fit_posthoc = benchmark.fit_posthoc
+  monkeypatch.setattr(benchmark, "fit_posthoc", spy)
+  results = run_uncertainty_quality(config, str(tmp_path))
+  (model, field), = fits
+  live = np.asarray(model.mask)
+  n = int(live.sum())
+  assert int(field.num_live) == n
+  for g, v in model.params.mean.items():  # the deterministic model's mean, bit for bit
+    np.testing.assert_array_equal(np.asarray(field.params.mean[g])[:n], np.asarray(v)[live],
+                                  err_msg=g)
+  assert any(float(np.max(v)) > 0 for v in jax.tree.leaves(field.params.spread))
+  (record,) = results["ause"]["records"]
+  assert record["methods"] == ["posthoc_colour", "posthoc_depth"]
+  assert record["posthoc"]["steps"] == 20 and record["posthoc"]["mean_unchanged"]
+  with np.load(tmp_path / "ause" / "synthetic-seed0-deterministic.npz") as f:
+    for k in ("map_posthoc_colour", "map_posthoc_depth"):
+      assert f[k].shape == (2, 24, 24) and np.all(np.isfinite(f[k])) and np.all(f[k] >= 0)
+    assert np.max(f["map_posthoc_colour"]) > 0
+  for measure in ("mae", "rmse"):
+    for key in ("deterministic/posthoc_colour", "deterministic/posthoc_depth",
+                "deterministic/constant"):
+      value = results["ause"]["summary"]["ause"][measure][key]["synthetic"]
+      assert 0.0 <= value <= 1.0, (measure, key, value)
+  assert "| Post-hoc B_hat: U (Eq. 10) |" in (tmp_path / "table.md").read_text()

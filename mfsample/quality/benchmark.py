@@ -5,7 +5,9 @@ one for the baselines), all trained on the same views of the forward-facing arc:
 
 1. train the model (`config.train`, its sampler replaced; `planning.training.train_on_views`);
 2. at every test view, render the mean (colour, coverage, expected depth), take the depth
-   error and its mask, and each method's per-pixel map (`maps`);
+   error and its mask, and each method's per-pixel map (`maps`); the baseline "posthoc"
+   first fits B_hat to the deterministic model with its mean frozen (`fit_posthoc`), so its
+   maps are judged against the very error of the model they were fitted to;
 3. AUSE of every map against its model's depth error (`mfsample.metrics.ause`, MAE and RMSE),
    and, as the floor of no information, of a constant map.
 
@@ -16,6 +18,7 @@ finished models.
 
 import json
 import os
+import tempfile
 import time
 
 import jax
@@ -31,8 +34,11 @@ from mfsample.quality import maps as maps_lib
 from mfsample.renderer.budget import render_with_budget
 
 SAMPLER_KINDS = ("lowrank", "diagonal", "block")
-BASELINES = ("fisher", "activenerf")
+POSTHOC = "posthoc"
+BASELINES = ("fisher", "activenerf", POSTHOC)
 DETERMINISTIC = "deterministic"
+# The maps of the baseline "posthoc": Ours' two maps of the fitted field.
+POSTHOC_MAPS = ("posthoc_colour", "posthoc_depth")
 
 
 def parse_sampler(flag):
@@ -73,8 +79,50 @@ def unit_name(scene, seed, name):
 
 
 def method_keys(config, name):
-  """The maps a model yields: "colour" and "depth" (Ours' samplers), or the baselines."""
-  return list(config.ause.baselines) if name == DETERMINISTIC else ["colour", "depth"]
+  """The maps a model yields: "colour" and "depth" (Ours' samplers), or the baselines'
+  ("posthoc" yields `POSTHOC_MAPS`)."""
+  if name != DETERMINISTIC:
+    return ["colour", "depth"]
+  keys = []
+  for baseline in config.ause.baselines:
+    keys += list(POSTHOC_MAPS) if baseline == POSTHOC else [baseline]
+  return keys
+
+
+def fit_posthoc(config, model, train_views, seed, settings=None):
+  """B_hat fitted to a trained deterministic `model` with its mean frozen (post-hoc U).
+
+  The user's path for a pretrained model: the model is written as a 3DGS .ply
+  (`data.ply.export_ply`) and `mfsample.train.posthoc.fit_spread` fits the B_hat of
+  `ause.posthoc_sampler` to it for `ause.posthoc_steps` steps on its training views, with
+  the models' training config otherwise (loss, B_hat learning rates and bounds; lambda as
+  `posthoc.posthoc_config` chooses).
+
+  Returns:
+    `mfsample.train.TrainResult` (`state.model`: the field, its mean `model`'s live
+    Gaussians bit for bit; `train_seconds`: the fit's wall-clock, compilation included).
+  """
+  from mfsample.data.ply import export_ply
+  from mfsample.train.posthoc import fit_spread
+
+  cfg = model_config(config.train, config.ause.posthoc_sampler)
+  with cfg.unlocked():
+    cfg.seed = int(seed)
+    cfg.train.num_steps = int(config.ause.posthoc_steps)
+    cfg.train.progress = False
+  with tempfile.TemporaryDirectory(prefix="posthoc_") as tmp:
+    path = os.path.join(tmp, "point_cloud.ply")
+    export_ply(path, model)
+    return fit_spread(cfg, train_views, path, settings=settings)
+
+
+def same_mean(model, fitted):
+  """Whether `fitted`'s live Gaussians are `model`'s, parameter for parameter, bit for bit."""
+  live, n = np.asarray(model.mask), int(fitted.num_live)
+  if set(model.params.mean) != set(fitted.params.mean) or int(live.sum()) != n:
+    return False
+  return all(np.array_equal(np.asarray(v)[live], np.asarray(fitted.params.mean[g])[:n])
+             for g, v in model.params.mean.items())
 
 
 def evaluate_model(config, name, trained, train_views, test_views, seed):
@@ -106,7 +154,8 @@ def evaluate_model(config, name, trained, train_views, test_views, seed):
     renders.append(np.asarray(out.rgb))
     errors.append(err)
     masks.append(mask)
-  maps, settings = _method_maps(config, name, model, settings, train_views, test_views, seed)
+  maps, settings, extra = _method_maps(config, name, model, settings, train_views, test_views,
+                                       seed)
 
   views = []
   for i in range(len(test_views)):
@@ -122,26 +171,35 @@ def evaluate_model(config, name, trained, train_views, test_views, seed):
     views.append(entry)
   record = {"model": name, "methods": methods, "views": views,
             "num_live": int(model.num_live), "train_seconds": float(trained.seconds),
-            "data_loss": float(trained.loss)}
+            "data_loss": float(trained.loss), **extra}
   arrays = {"render": np.stack(renders).astype(np.float32),
             "depth_error": np.stack(errors).astype(np.float32), "mask": np.stack(masks),
             **{f"map_{k}": np.stack(maps[k]).astype(np.float32) for k in methods}}
   return record, arrays
 
 
-def _method_maps(config, name, model, settings, train_views, test_views, seed):
-  """{method: [per test view [H, W] numpy]} and the render settings that sufficed."""
+def _sample_maps(config, model, settings, test_views, prefix=""):
+  """Ours' colour and depth maps of a stochastic field at the test views, under the keys
+  `prefix + "colour"` and `prefix + "depth"`, and the render settings that sufficed."""
   bg = jnp.asarray(config.data.background, jnp.float32)
-  out = {}
+  z = unc.uncertainty_z(model, int(config.ause.samples), int(config.ause.z_seed))
+  out = {prefix + "colour": [], prefix + "depth": []}
+  for i in range(len(test_views)):
+    res, settings = render_with_budget(maps_lib.sample_maps, settings, model,
+                                       test_views.cameras[i], z, bg)
+    out[prefix + "colour"].append(np.asarray(res.colour))
+    out[prefix + "depth"].append(np.asarray(res.depth))
+  return out, settings
+
+
+def _method_maps(config, name, model, settings, train_views, test_views, seed):
+  """{method: [per test view [H, W] numpy]}, the render settings that sufficed, and what the
+  record keeps of the post-hoc fit ({"posthoc": {...}} or {})."""
   if name != DETERMINISTIC:
-    z = unc.uncertainty_z(model, int(config.ause.samples), int(config.ause.z_seed))
-    out = {"colour": [], "depth": []}
-    for i in range(len(test_views)):
-      res, settings = render_with_budget(maps_lib.sample_maps, settings, model,
-                                         test_views.cameras[i], z, bg)
-      out["colour"].append(np.asarray(res.colour))
-      out["depth"].append(np.asarray(res.depth))
-    return out, settings
+    out, settings = _sample_maps(config, model, settings, test_views)
+    return out, settings, {}
+  bg = jnp.asarray(config.data.background, jnp.float32)
+  out, extra = {}, {}
   key = jax.random.fold_in(jax.random.PRNGKey(int(seed)), 40)
   if "fisher" in config.ause.baselines:
     f = config.fisher
@@ -167,7 +225,16 @@ def _method_maps(config, name, model, settings, train_views, test_views, seed):
       (beta2, _), settings = render_with_budget(maps_lib.activenerf_map, settings, vmodel,
                                                 test_views.cameras[i], stats_of=lambda o: o[1])
       out["activenerf"].append(np.asarray(beta2))
-  return out, settings
+  if POSTHOC in config.ause.baselines:
+    fit = fit_posthoc(config, model, train_views, seed, settings=settings)
+    field = fit.state.model
+    maps, settings = _sample_maps(config, field, fit.setup.step_config.settings, test_views,
+                                  prefix=POSTHOC + "_")
+    out.update(maps)
+    extra[POSTHOC] = {"sampler": str(config.ause.posthoc_sampler),
+                      "steps": int(fit.state.step), "seconds": float(fit.train_seconds),
+                      "mean_unchanged": same_mean(model, field)}
+  return out, settings, extra
 
 
 def _save_arrays(path, arrays):

@@ -62,7 +62,14 @@ def default_config():
   # Baselines on a deterministic model: FisherRF's per-pixel uncertainty
   # (`planning.fisher.fisher_pixel_variance`) and ActiveNeRF's rendered variance
   # (`planning.variance.rendered_variance`). () trains no deterministic model.
+  # "posthoc" (not by default): U of the same deterministic model after the fact, B_hat
+  # fitted with its mean frozen (`mfsample.train.posthoc.fit_spread`), as for a pretrained
+  # 3DGS model; its colour U and depth variance are scored as Ours'.
   a.baselines = ("fisher", "activenerf")
+  a.posthoc_sampler = "lowrank:2"  # The fitted field's sampler, "kind" or "kind:k".
+  # Steps of the B_hat fit (the deterministic model's training views; lambda = the models'
+  # loss.volume_weight, else `posthoc.POSTHOC_VOLUME_WEIGHT`; learning rates the models').
+  a.posthoc_steps = 400
   a.samples = 8  # M, samples of the stochastic maps (colour U and depth variance).
   a.z_seed = 6174  # Sobol scrambling seed of the low-rank samples (authors' code: 6174).
 

@@ -2,10 +2,10 @@
 
 Rows: the ground truth (image, exact depth), then one row per model: its mean render, its
 depth error (grey where it does not count) and its maps (Ours: colour U and depth variance;
-the deterministic model: FisherRF and ActiveNeRF). A map is shown by its rank among the
-counted pixels (0 = least, 1 = most uncertain), since AUSE sees only the order; the panel
-title gives its AUSE on this view. The PNG is stored with a 256-colour palette (Pillow, which
-matplotlib depends on): a third of the size, for the docs.
+the deterministic model: its baselines', FisherRF, ActiveNeRF, post-hoc B_hat). A map is
+shown by its rank among the counted pixels (0 = least, 1 = most uncertain), since AUSE sees
+only the order; the panel title gives its AUSE on this view. The PNG is stored with a
+256-colour palette (Pillow, which matplotlib depends on): a third of the size, for the docs.
 """
 
 import io
@@ -55,7 +55,8 @@ def scene_figure(scene, test_views, records, workdir, path, view=0, seed=None):
   if not mine:
     return None
   rows = len(mine) + 1
-  fig, axes = plt.subplots(rows, 4, figsize=(5.6, 1.45 * rows), squeeze=False)
+  cols = 2 + max(len(r["methods"]) for r in mine)  # image, error, then every map
+  fig, axes = plt.subplots(rows, cols, figsize=(1.4 * cols, 1.45 * rows), squeeze=False)
   for ax in axes.ravel():
     ax.set_xticks([])
     ax.set_yticks([])
@@ -86,7 +87,7 @@ def scene_figure(scene, test_views, records, workdir, path, view=0, seed=None):
                         vmin=0.0, vmax=err_max or 1.0, interpolation="nearest")
     axes[row, 1].set_title(f"depth error (MAE {r['views'][view]['depth_mae'] or 0:.3f})",
                            fontsize=7)
-    for col, method in enumerate(r["methods"][:2], start=2):
+    for col, method in enumerate(r["methods"], start=2):
       ause = r["views"][view]["ause"].get(method, {}).get("mae")
       label = BASELINE_LABELS.get(method) or MAP_LABELS.get(method, method)
       axes[row, col].imshow(_ranks(arrays[f"map_{method}"][view], mask), cmap=cmap,

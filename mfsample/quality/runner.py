@@ -48,6 +48,8 @@ def check_config(config):
     if not (a.samplers or a.baselines):
       raise checks.ConfigError("config.ause.samplers and config.ause.baselines are both "
                                "empty: no method to measure")
+    _check_samplers(config, "ause.posthoc_sampler", min_length=1, single=True)
+    checks.check_int(config, "ause.posthoc_steps", minimum=1)
     checks.check_int(config, "ause.samples", minimum=2)
     checks.check_int(config, "ause.z_seed", minimum=0)
     checks.check_int(config, "data.width", minimum=1)
@@ -94,8 +96,12 @@ def check_config(config):
           f"{planning.data.num_candidates})")
 
 
-def _check_samplers(config, field, min_length):
-  flags = checks.check_sequence(config, field, min_length=min_length, distinct=True)
+def _check_samplers(config, field, min_length, single=False):
+  """Sampler flags ("kind" or "kind:k"); `single`: one flag (a string field), not a sequence."""
+  if single:
+    flags = (checks.get_field(config, field),)
+  else:
+    flags = checks.check_sequence(config, field, min_length=min_length, distinct=True)
   for flag in flags:
     try:
       benchmark.parse_sampler(flag)

@@ -13,7 +13,9 @@ import numpy as np
 
 from mfsample.quality.benchmark import DETERMINISTIC, parse_sampler
 
-BASELINE_LABELS = {"fisher": "FisherRF", "activenerf": "ActiveNeRF"}
+BASELINE_LABELS = {"fisher": "FisherRF", "activenerf": "ActiveNeRF",
+                   "posthoc_colour": "Post-hoc B_hat: U (Eq. 10)",
+                   "posthoc_depth": "Post-hoc B_hat: depth variance"}
 MAP_LABELS = {"colour": "U (Eq. 10)", "depth": "depth variance"}
 
 
@@ -71,6 +73,12 @@ def ause_summary(records, scenes):
     context["constant_ause"] = out["ause"]["mae"][f"{model}/constant"]
     context["train_seconds"] = _mean([r["train_seconds"] for r in records
                                       if r["model"] == model])
+    fits = [r["posthoc"] for r in records if r["model"] == model and "posthoc" in r]
+    if fits:  # the post-hoc fits of the deterministic model
+      context["posthoc"] = {"sampler": fits[0]["sampler"],
+                            "steps": sorted({f["steps"] for f in fits}),
+                            "seconds": _mean([f["seconds"] for f in fits]),
+                            "mean_unchanged": all(f["mean_unchanged"] for f in fits)}
     out["context"][model] = context
   return out
 
@@ -103,6 +111,13 @@ def ause_markdown(summary, scenes, title):
                  f"{_fmt(ctx['depth_mae']['mean'], 3)} | "
                  f"{_fmt(ctx['mask_fraction']['mean'], 2)} | "
                  f"{_fmt(ctx['constant_ause']['mean'])} | {_fmt(ctx['train_seconds'], 0)} |")
+  for model, ctx in summary["context"].items():
+    if "posthoc" in ctx:
+      p = ctx["posthoc"]
+      lines += ["", f"Post-hoc B_hat ({p['sampler']}) fitted to the {model_label(model).lower()} "
+                f"model with its mean frozen: {', '.join(map(str, p['steps']))} steps, "
+                f"{_fmt(p['seconds'], 1)} s per model (mean, compilation included); mean "
+                f"{'unchanged, bit for bit' if p['mean_unchanged'] else 'CHANGED'}."]
   return "\n".join(lines) + "\n"
 
 
