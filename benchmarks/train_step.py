@@ -11,6 +11,7 @@ Each measurement runs in a fresh subprocess, so its peak RSS is its own and no c
 cache leaks between variants; `measure_variant` is the same measurement in this process.
 
   PYTHONPATH=. python benchmarks/train_step.py --rounds=3
+  PYTHONPATH=. python benchmarks/train_step.py --clock=process  # on a CPU shared with others
 
 A variant `NAME@C` composites C chunks per loop step (`render.chunks_per_step`, a speed
 knob) and takes its ratio to `deterministic@C`; every variant also gets its ratio to the
@@ -54,6 +55,11 @@ _FROM = flags.DEFINE_string(
     "--config=configs/train.py:lego, same --size): start every variant from its mean "
     "Gaussians (with fresh B_hat) instead of the random initial cloud, i.e. time "
     "late-training steps.")
+_CLOCK = flags.DEFINE_enum(
+    "clock", "wall", ["wall", "process"],
+    "What a step's time is: wall-clock, or the CPU time of the measuring process (all its "
+    "threads: the work done, steadier than wall-clock on a machine shared with other jobs, "
+    "and no measure of speed on a GPU).")
 _OUT = flags.DEFINE_string("out", "workdirs/benchmarks/train_step.json", "Output JSON.")
 _CHILD = flags.DEFINE_string("child", None, "Internal: run one variant and print JSON.")
 
@@ -143,7 +149,7 @@ def _peak_rss_mb():
   return peak / (2**20 if sys.platform == "darwin" else 1024.0)  # bytes on macOS, KiB on Linux
 
 
-def measure_variant(config, *, steps, warmup, from_checkpoints=None):
+def measure_variant(config, *, steps, warmup, from_checkpoints=None, clock="wall"):
   """Times the jitted training step of `config` in this process.
 
   The step is compiled, run `warmup` times untimed, then `steps` times, each call timed to
@@ -156,6 +162,8 @@ def measure_variant(config, *, steps, warmup, from_checkpoints=None):
     warmup: untimed steps after compilation.
     from_checkpoints: optional checkpoint folder whose mean Gaussians replace the random
       initial cloud.
+    clock: "wall" (`time.perf_counter`) or "process" (`time.process_time`: CPU time of
+      this process, every thread).
 
   Returns:
     {ms_median, ms_min, ms_all [steps], peak_rss_mb (of this process so far: a variant's
@@ -179,15 +187,16 @@ def measure_variant(config, *, steps, warmup, from_checkpoints=None):
     state = _from_trained(state, setup, from_checkpoints)
   m = setup.step_config.num_samples
   fn = make_train_step(setup.step_config)
+  timer = time.process_time if clock == "process" else time.perf_counter
   t0 = time.perf_counter()
   step, times = 0, []
   while step < warmup + steps:
     view = jnp.int32(loop.view_for_step(0, step, len(views)))
     rows = setup.sobol[step * m:(step + 1) * m]
-    t = time.perf_counter()
+    t = timer()
     new_state, metrics = fn(state, views.images, views.cameras, view, rows)
     jax.block_until_ready(new_state)
-    dt = time.perf_counter() - t
+    dt = timer() - t
     if bool(metrics.overflow):
       settings = fit_budget(setup.step_config.settings, metrics)
       setup = setup._replace(step_config=dataclasses.replace(setup.step_config,
@@ -261,7 +270,8 @@ def summarize(variants, rounds):
 def _child_flags():
   """The flags a child needs to rebuild this run's configs."""
   args = [f"--steps={_STEPS.value}", f"--warmup={_WARMUP.value}", f"--size={_SIZE.value}",
-          f"--points={_POINTS.value}", f"--samples={_SAMPLES.value}", f"--data={_DATA.value}"]
+          f"--points={_POINTS.value}", f"--samples={_SAMPLES.value}", f"--data={_DATA.value}",
+          f"--clock={_CLOCK.value}"]
   if _FROM.value:
     args.append(f"--from_checkpoints={_FROM.value}")
   return args
@@ -279,7 +289,8 @@ def _measure_in_subprocess(variant):
 def _measure_here(variant):
   base, _ = base_config(_DATA.value, _SIZE.value, _POINTS.value, _SAMPLES.value)
   return measure_variant(variant_config(base, variant), steps=_STEPS.value,
-                         warmup=_WARMUP.value, from_checkpoints=_FROM.value)
+                         warmup=_WARMUP.value, from_checkpoints=_FROM.value,
+                         clock=_CLOCK.value)
 
 
 def main(argv):
@@ -312,6 +323,7 @@ def main(argv):
                           "from_checkpoints": _FROM.value, "live_gaussians": first["live"],
                           "points": _POINTS.value, "samples": _SAMPLES.value,
                           "steps": _STEPS.value, "warmup": _WARMUP.value,
+                          "clock": _CLOCK.value,
                           "load_end": list(load_average())})
   print(f"saved {_OUT.value}")
 

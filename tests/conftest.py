@@ -24,6 +24,20 @@ from configs import train as train_configs  # noqa: E402
 from mfsample.train import data as data_lib  # noqa: E402
 
 
+def float64():
+  """A with-block that computes in float64 (finite-difference checks).
+
+  `jax.enable_x64` in recent JAX; its predecessor `jax.experimental.enable_x64` in the older
+  versions pyproject.toml admits.
+  """
+  import jax
+
+  if hasattr(jax, "enable_x64"):
+    return jax.enable_x64(True)
+  from jax.experimental import enable_x64
+  return enable_x64()
+
+
 def tiny_config(kind="lowrank", **overrides):
   """The tiny training config with `sampler.kind = kind` and dotted `overrides`."""
   config = train_configs.get_config("tiny")

@@ -51,7 +51,7 @@ def random_model(kind="lowrank", *, num=80, spread=0.05, seed=0, dtype=jnp.float
   model = init_model(jax.random.PRNGKey(seed), points, spec=spec, sh_degree=sh_degree,
                      init_scales=scales, init_opacity=0.6,
                      colors=rng.uniform(0.1, 0.9, (num, 3)))
-  # init_model builds float32; cast the floating leaves (float64 needs jax.enable_x64).
+  # init_model builds float32; cast the floating leaves (float64 needs conftest.float64).
   cast = lambda x: x.astype(dtype) if jnp.issubdtype(x.dtype, jnp.floating) else x
   return jax.tree.map(cast, model)
 

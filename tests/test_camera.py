@@ -4,6 +4,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from conftest import float64
 
 from mfsample import Camera
 
@@ -76,7 +77,7 @@ def test_gradient_through_look_at_matches_finite_differences():
     uv, z = cam.project(point)
     return jnp.sum(uv * jnp.array([1.0, 2.0])) + z[0]
 
-  with jax.enable_x64(True):
+  with float64():
     eye = jnp.array([2.0, -2.5, 1.2])
     grad = jax.grad(f)(eye)
     for i in range(3):

@@ -11,6 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 import scipy.linalg
+from conftest import float64
 from planning_testlib import random_model, tiny_config, tiny_pool, trained_one_view
 
 from mfsample import RenderSettings
@@ -69,7 +70,7 @@ def test_angle_to_nearest_measures_directions_from_the_sphere_centre():
 
 
 def test_se3_exp_matches_the_matrix_exponential():
-  with jax.enable_x64(True):
+  with float64():
     rng = np.random.default_rng(0)
     xis = rng.normal(size=(4, 6)) * np.array([1e-7, 1e-3, 0.5, 2.0])[:, None]
     ours = np.asarray(jax.jit(poses.se3_exp)(jnp.asarray(xis)))  # batched
@@ -111,7 +112,7 @@ def test_fisher_probe_estimator_is_unbiased():
   # is the exact expectation of the estimator; over the 6 unit vectors (times 6) it is
   # diag(J^T J) by definition. Both go through the same compiled function (64 probes each,
   # the unit vectors padded with zeros).
-  with jax.enable_x64(True):
+  with float64():
     m = random_model("deterministic", num=6, dtype=jnp.float64, radius=0.05, seed=1)
     sphere = poses.SphereSpec(radius=3.0, width=2, height=1, fov_x=0.05)
     cam = poses.spherical_camera(jnp.asarray([0.1, 0.3], jnp.float64), sphere)
@@ -135,7 +136,7 @@ def test_fisher_pixel_variance_decomposes_the_score():
   # u(p) = sum_d D_d (dI_p / dtheta_d)^2 from the full Jacobian (forward mode), against the
   # probe estimator with the 64 rows of a Hadamard matrix as probes, whose second moment is
   # exactly the identity over the 60 live parameters (6 Gaussians x 10): it must be exact.
-  with jax.enable_x64(True):
+  with float64():
     m = random_model("deterministic", num=6, dtype=jnp.float64, radius=0.05, seed=1)
     sphere = poses.SphereSpec(radius=3.0, width=3, height=2, fov_x=0.06)
     cam = poses.spherical_camera(jnp.asarray([0.1, 0.3], jnp.float64), sphere)

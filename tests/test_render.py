@@ -7,6 +7,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from conftest import float64
 from render_testlib import (
   BACKGROUND,
   EXTREME_SETTINGS,
@@ -145,7 +146,7 @@ def test_gradients_match_float64_finite_differences():
   """
   fields = ("means", "scales", "quats", "opacities", "sh")
   smooth = SMALL.replace(alpha_min=0.0, radius_sigma=6.0)
-  with jax.enable_x64(True):
+  with float64():
     g = random_gaussians(40, sh_degree=2, seed=11, scale_range=(0.05, 0.3),
                          opacity_range=(0.2, 0.8), dtype=jnp.float64)
     cam = orbit_camera(24, 20, distance=3.0)

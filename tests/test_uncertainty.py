@@ -10,6 +10,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from conftest import float64
 from planning_testlib import opposite_uv, random_model, sphere_for, tiny_pool, trained_one_view
 
 from mfsample import RenderSettings
@@ -69,7 +70,7 @@ def test_gradient_wrt_camera_matches_finite_differences():
   # differences in float64. The step is tiny on purpose: a splatted image has measure-zero
   # discontinuities in the pose (two Gaussians swapping depth order, a footprint crossing
   # its cut-off), and steps of 1e-6 .. 1e-3 cross some of them.
-  with jax.enable_x64(True):
+  with float64():
     m = random_model("lowrank", dtype=jnp.float64, num=40, spread=0.05, seed=3)
     z = unc.uncertainty_z(m, 2)
     sphere = SPHERE.replace(width=16, height=12)
