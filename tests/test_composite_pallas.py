@@ -12,6 +12,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from jax import export  # a submodule that older JAX does not import with jax
 from render_testlib import (
   BACKGROUND,
   EXTREME_SETTINGS,
@@ -149,9 +150,9 @@ def test_kernel_lowers_for_cuda_on_a_cpu():
 
   triton = "__gpu$xla.gpu.triton"
   for fn, cam in ((loss, jax.tree.map(lambda x: x[0], cams)), (batched_loss, cams)):
-    exported = jax.export.export(
+    exported = export.export(
         jax.jit(jax.grad(fn, argnums=(0, 1))), platforms=("cuda",),
-        disabled_checks=[jax.export.DisabledSafetyCheck.custom_call(triton)])(g, cam)
+        disabled_checks=[export.DisabledSafetyCheck.custom_call(triton)])(g, cam)
     text = exported.mlir_module()
     assert exported.platforms == ("cuda",)
     assert text.count(f"@{triton}(") == 2, "one forward and one backward kernel"
