@@ -245,6 +245,30 @@ def test_bad_lights_get_clear_errors():
     strategies.make_light_strategy("oracle")
 
 
+@pytest.mark.parametrize("variant", ["", "tiny"])
+def test_the_config_file_loads_from_the_command_line(variant):
+  import pathlib
+
+  from absl import flags
+  from ml_collections import config_flags
+
+  path = pathlib.Path(__file__).resolve().parents[1] / "configs" / "light_planning.py"
+  argv = ["prog", f"--config={path}:{variant}" if variant else f"--config={path}",
+          "--config.num_lights=4", "--config.planning.ascent_steps=7"]
+  fv = flags.FlagValues()
+  config_flags.DEFINE_config_file("config", None, "", flag_values=fv, lock_config=True,
+                                  sys_argv=argv)
+  fv(argv)
+  config = fv.config
+  assert config.num_lights == 4 and config.planning.ascent_steps == 7
+  assert config.data.kind == {"": "scene", "tiny": "synthetic"}[variant]
+  protocol.check_config(config)
+  with pytest.raises(AttributeError):
+    config.num_light = 3  # locked: typos are errors
+  with pytest.raises(ValueError, match="unknown variant 'huge'"):
+    light_planning.get_config("huge")
+
+
 def test_the_config_is_checked_on_entry_naming_the_field():
   config = tiny()
   config.num_lights = 6  # > n = 4 with the orthogonal strategy

@@ -113,6 +113,7 @@ def u_sphere_figure(q, norm, path, height=32, width=64):
   idx = np.arange(n)
   ax1.bar(idx - 0.2, one_hot, width=0.4, label="one-hot light e_j")
   ax1.bar(idx + 0.2, eig, width=0.4, label="eigenvector j of Q (sorted)")
+  ax1.set_xticks(idx)
   ax1.set_xlabel("coefficient / eigenvector index j")
   ax1.set_title("U at the common norm", fontsize=9)
   ax1.legend(fontsize=7)

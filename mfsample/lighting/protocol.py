@@ -48,7 +48,7 @@ from mfsample.uncertainty import uncertainty_z
 
 # Fields that may change between calls on one workdir: which strategies to run, how the
 # run is shown, and speed-only settings.
-RESUME_FREE_FIELDS = ("strategies", "progress", "data.progress", "figures", "eval.lpips_net",
+RESUME_FREE_FIELDS = ("strategies", "progress", "data.progress", "figures",
                       "render.chunks_per_step")
 
 
@@ -289,12 +289,23 @@ def _run_strategy(ctx, name, shared, setup, workdir, bar):
   return {"strategy": name, "label": strategy.label, "phases": phases[1:]}, setup
 
 
+def _earlier_calls(workdir):
+  """The `calls` of an earlier results.json in `workdir` (wall-clock and CPU time of every
+  call that added to it), or []."""
+  path = os.path.join(workdir, "results.json")
+  if not os.path.exists(path):
+    return []
+  with open(path) as f:
+    return list(json.load(f).get("calls", []))
+
+
 def run_light_planning(config, workdir):
   """Runs the protocol for every strategy of `config`; writes and returns the results.
 
   Writes to `workdir`: `config.json`, `shared/` (the first phase), `runs/<strategy>.json`
-  (each finished strategy; loaded, not recomputed, by a later call), `results.json`,
-  `table.md`, and with `figures.enabled` `metrics.png`, `relit.png`, `u_sphere.png`.
+  (each finished strategy; loaded, not recomputed, by a later call), `results.json` (with
+  `calls`: the wall-clock and CPU time of every call on this workdir), `table.md`, and with
+  `figures.enabled` `metrics.png`, `relit.png`, `u_sphere.png`.
 
   Returns:
     the results dict (as in `results.json`).
@@ -318,7 +329,7 @@ def run_light_planning(config, workdir):
   bar = tqdm(total=steps + len(names) * (total - 1) * steps, desc="light planning",
              unit="step", disable=not config.progress, dynamic_ncols=True)
   shared_state, setup, shared = _shared_phase(ctx, setup, workdir, bar)
-  records = []
+  records, ran = [], []
   for name in names:
     path = os.path.join(workdir, "runs", f"{name}.json")
     if os.path.exists(path):
@@ -331,6 +342,7 @@ def run_light_planning(config, workdir):
     record, grown = _run_strategy(ctx, name, shared_state, setup, workdir, bar)
     setup = setup._replace(step_config=grown.step_config)
     record["seconds"] = time.perf_counter() - t_run
+    ran.append(name)
     write_json(path, record, indent=1)
     shutil.rmtree(os.path.join(workdir, "runs", name), ignore_errors=True)
     records.append(record)
@@ -362,5 +374,8 @@ def run_light_planning(config, workdir):
   # CPU time of every thread of this process: on an otherwise idle machine the wall-clock
   # lies between this / (cores) and about this; under load, wall-clock alone misleads.
   results["cpu_seconds_this_call"] = time.process_time() - cpu_start
+  results["calls"] = _earlier_calls(workdir) + [{
+      "seconds": results["seconds_this_call"], "cpu_seconds": results["cpu_seconds_this_call"],
+      "load_average": results["load_average"], "strategies_run": ran}]
   write_json(os.path.join(workdir, "results.json"), results, indent=1)
   return results
