@@ -57,8 +57,8 @@ def default_config():
   # ----------------------------------------------------------------- model
   config.model = model = ml_collections.ConfigDict()
   # m, outgoing SH coefficients of T (1: diffuse, no view dependence; 4, 9, 16). The default
-  # scene has glossy plastics and a gold sphere: view dependence up to band 1. With 12
-  # views at 48 x 48 the higher bands would be fitted from too few directions per Gaussian.
+  # scene has glossy plastics and a gold sphere: some view dependence. From 12 views at
+  # 48 x 48 we model band 1 of it only (a choice, not a measured optimum; paper: 16).
   model.out_coeffs = 4
   model.light_coeffs = 16  # n, SH coefficients of a light (bands 0-3, as the paper).
   # Random initial points in the scene box (no SfM); no densification by default (below).
