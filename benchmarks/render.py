@@ -1,19 +1,37 @@
-"""Renderer benchmark: forward and forward+backward time, peak memory, scaling.
+"""Renderer benchmark: forward and forward+backward time, memory, scaling, and variants.
 
-For every cell (N Gaussians x image size, SH degree 3) a fresh subprocess renders a random
-scene, fits the intersection budget, then times the jitted forward render and the jitted
-forward+backward (gradients w.r.t. every Gaussian parameter and the camera) as the median
-of repeated calls after warm-up. Peak memory is the subprocess's peak resident set size
-(which includes the ~0.3 GB JAX runtime) and XLA's own accounting of the compiled
-backward program (arguments + outputs + temporaries). Small cells also time the dense
-reference renderer in the same process, as a ratio.
+For every cell (N Gaussians x image size, SH degree 3) and every variant of the settings (each
+combination of --compositor, --radius_sigma, --chunks_per_step, --chunk_size and
+--searchsorted), a fresh subprocess renders a random scene, fits the intersection budget,
+then times the jitted forward render and the jitted forward+backward (gradients w.r.t. every
+Gaussian parameter and the camera) as the median of repeated calls after warm-up. Peak memory
+is the subprocess's peak resident set size (which includes the ~0.3 GB JAX runtime) and XLA's
+own accounting of the compiled backward program (arguments + outputs + temporaries). Small
+cells also time the dense reference renderer, in the first variant's process, as a ratio.
 
-  python benchmarks/render.py                 # the full table (a few minutes)
-  python benchmarks/render.py --quick         # two cells, for a smoke run
-  python benchmarks/render.py --out results/render_gpu.json --cells 10000x800
-  python benchmarks/render.py --cells=50000x400 --chunks_per_step=16,64,256  # loop length
+Variants run in interleaved rounds (--rounds): within a round every variant of a cell runs
+back to back, and each variant's time is divided by the first variant's of the same cell and
+round, so a change of the machine's load between rounds does not bias the ratios. Printed:
+median times over rounds and the median of the per-round ratios.
+
+--step times a whole training step instead (lego, configs/train_lego.py, --step_points
+initial points, --step_size pixels, densification off, the config's sampler) and, in the same
+process, the renderer's forward+backward on that step's mean Gaussians and first training
+camera: the share of the step spent outside the renderer. --trace_dir writes a JAX profiler
+trace (TensorBoard / Perfetto) of a few calls of each variant, for a per-kernel profile.
+
+  python benchmarks/render.py --quick --radius_sigma=3.0,3.33      # the old and the new rule
+  python benchmarks/render.py --quick --radius_sigma=3.0,3.33 --clock=process  # shared CPU
+  python benchmarks/render.py --cells=50000x400 --compositor=jnp,pallas
+  python benchmarks/render.py --cells=50000x400 --chunks_per_step=16,64,256,1024
+  python benchmarks/render.py --cells=50000x400 --searchsorted=scan,sort,compare_all
+  python benchmarks/render.py --step --compositor=jnp,pallas --trace_dir=workdirs/trace
+
+On a CPU the pallas compositor runs in the Pallas interpreter: its times there are marked
+"interpreted" and measure nothing about a GPU.
 """
 
+import itertools
 import json
 import os
 import platform
@@ -28,35 +46,100 @@ from absl import app, flags
 FULL_CELLS = [f"{n}x{r}" for n in (2000, 10000, 50000) for r in (100, 200, 400)]
 QUICK_CELLS = ["2000x100", "10000x200"]
 DENSE_LIMIT = 2e7  # H * W * N: the dense reference holds [H W, N] arrays
+STEP_CELL = "step"
 
 _CELLS = flags.DEFINE_list("cells", None, "NxRES cells; default: the full 3x3 grid.")
 _QUICK = flags.DEFINE_bool("quick", False, "Only " + ", ".join(QUICK_CELLS) + ".")
 _REPEATS = flags.DEFINE_integer("repeats", 7, "Timed calls per measurement (median).")
+_ROUNDS = flags.DEFINE_integer("rounds", 1, "Interleaved rounds over all variants.")
+_COMPOSITOR = flags.DEFINE_list("compositor", ["jnp"], "RenderSettings.compositor values.")
+_RADIUS_SIGMA = flags.DEFINE_list(
+    "radius_sigma", ["3.33"], "RenderSettings.radius_sigma values (3.0: the former 3-sigma "
+    "footprint; 3.33: the alpha rule for every opacity).")
 _CHUNKS_PER_STEP = flags.DEFINE_list(
-    "chunks_per_step", ["16"], "RenderSettings.chunks_per_step of every cell; several values "
-    "measure every cell at each (the compositing loop's work per sequential step).")
-_OUT = flags.DEFINE_string("out", "results/bench_render.json", "Where to save the JSON.")
+    "chunks_per_step", ["16"], "RenderSettings.chunks_per_step values (the jnp compositor's "
+    "work per sequential loop step).")
+_CHUNK_SIZE = flags.DEFINE_list("chunk_size", ["32"], "RenderSettings.chunk_size values.")
+_SEARCHSORTED = flags.DEFINE_list("searchsorted", ["scan"],
+                                  "RenderSettings.searchsorted_method values.")
+_DENSE = flags.DEFINE_bool("dense", True, "Time the dense reference on small cells.")
+_CLOCK = flags.DEFINE_enum(
+    "clock", "wall", ["wall", "process"],
+    "wall: elapsed time (latency). process: CPU time of the benchmark process, all its threads "
+    "(the work done; steadier than wall time on a machine shared with other jobs, and not a "
+    "latency; meaningless for a GPU, whose work is not the process's CPU time).")
+_STEP = flags.DEFINE_bool("step", False, "Time a whole training step and its renderer.")
+_STEP_SIZE = flags.DEFINE_integer("step_size", 400, "--step: image side (lego 800 / 2^k).")
+_STEP_POINTS = flags.DEFINE_integer("step_points", 100_000, "--step: initial points.")
+_DATA = flags.DEFINE_string("data", "data/nerf_synthetic/lego",
+                            "--step: NeRF Synthetic lego folder (synthetic scene if absent).")
+_TRACE = flags.DEFINE_string("trace_dir", None, "Write a profiler trace per variant here.")
+_OUT = flags.DEFINE_string("out", "workdirs/bench_render.json", "Where to save the JSON.")
 _ONE = flags.DEFINE_string("one_cell", None, "Internal: run one cell and print its JSON.")
+_VARIANT = flags.DEFINE_string("variant", None, "Internal: the variant's settings as JSON.")
+
+
+def _variants():
+  """Every combination of the listed settings, the first values first."""
+  combos = itertools.product(_COMPOSITOR.value, map(float, _RADIUS_SIGMA.value),
+                             map(int, _CHUNKS_PER_STEP.value), map(int, _CHUNK_SIZE.value),
+                             _SEARCHSORTED.value)
+  keys = ("compositor", "radius_sigma", "chunks_per_step", "chunk_size", "searchsorted_method")
+  return [dict(zip(keys, c, strict=True)) for c in combos]
+
+
+def _label(variant):
+  return (f"{variant['compositor']} r={variant['radius_sigma']:g} "
+          f"cps={variant['chunks_per_step']} chunk={variant['chunk_size']} "
+          f"ss={variant['searchsorted_method']}")
 
 
 def _median_ms(fn, repeats):
   import jax
 
+  clock = time.process_time if _CLOCK.value == "process" else time.perf_counter
   jax.block_until_ready(fn())  # warm-up (compilation happened before)
   times = []
   for _ in range(repeats):
-    start = time.perf_counter()
+    start = clock()
     jax.block_until_ready(fn())
-    times.append(time.perf_counter() - start)
+    times.append(clock() - start)
   return 1e3 * statistics.median(times)
 
 
-def run_cell(cell, repeats, chunks_per_step=16):
-  """Measures one cell in this process; returns a dict."""
+def _trace(fn, name):
+  """A profiler trace of three calls of `fn` under --trace_dir/name."""
+  import jax
+
+  if not _TRACE.value:
+    return
+  with jax.profiler.trace(os.path.join(_TRACE.value, name.replace(" ", "_"))):
+    for _ in range(3):
+      jax.block_until_ready(fn())
+
+
+def _start_settings(variant, budget=1 << 12):
+  """Settings of `variant` holding `budget` intersections in whole loop steps."""
+  from mfsample import RenderSettings
+
+  return RenderSettings.holding(budget, **variant)
+
+
+def _machine():
+  import jax
+
+  device = jax.devices()[0]
+  return {"platform": platform.platform(), "cpu_count": os.cpu_count(), "jax": jax.__version__,
+          "device": str(device), "device_kind": device.device_kind,
+          "backend": jax.default_backend()}
+
+
+def run_cell(cell, repeats, variant, dense):
+  """Measures one cell with one variant in this process; returns a dict."""
   import jax
   import jax.numpy as jnp
 
-  from mfsample import RenderSettings, render
+  from mfsample import render
   from mfsample.renderer.budget import render_with_budget
   from mfsample.renderer.reference import render_reference
   from mfsample.testing import orbit_camera, random_gaussians
@@ -65,10 +148,7 @@ def run_cell(cell, repeats, chunks_per_step=16):
   gaussians = random_gaussians(n, sh_degree=3, seed=0, scale_range=(0.005, 0.05))
   camera = orbit_camera(res, res, distance=3.5, fov_x=0.9)
   target = jnp.asarray(jax.random.uniform(jax.random.PRNGKey(0), (res, res, 3)))
-
-  # A start that holds 4096 intersections in whole loop steps; it grows on overflow.
-  start = RenderSettings.holding(1 << 12, chunks_per_step=chunks_per_step)
-  out, settings = render_with_budget(render, start, gaussians, camera)
+  out, settings = render_with_budget(render, _start_settings(variant), gaussians, camera)
 
   def loss(g, cam):
     return jnp.mean(jnp.abs(render(g, cam, settings=settings).rgb - target))
@@ -83,7 +163,7 @@ def run_cell(cell, repeats, chunks_per_step=16):
                  + mem.temp_size_in_bytes)
   result = {
       "cell": cell,
-      "chunks_per_step": chunks_per_step,
+      "variant": variant,
       "num_gaussians": n,
       "resolution": res,
       "budget": settings.max_intersections,
@@ -96,7 +176,8 @@ def run_cell(cell, repeats, chunks_per_step=16):
       # Before the dense reference runs: the tiled renderer's own peak.
       "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
   }
-  if n * res * res <= DENSE_LIMIT:
+  _trace(lambda: compiled_bwd(gaussians, camera), f"{cell}_{_label(variant)}")
+  if dense and n * res * res <= DENSE_LIMIT:
     dense_fwd = jax.jit(lambda g, c: render_reference(g, c, settings=settings)[0])
 
     def dense_loss(g, cam):
@@ -109,24 +190,135 @@ def run_cell(cell, repeats, chunks_per_step=16):
   return result
 
 
-def _table(rows):
-  lines = ["| N | image | chunks / step | intersections | fwd ms | fwd+bwd ms "
-           "| ms / 1k isect (fwd+bwd) | peak RSS MB | XLA bwd MB "
+def run_step(repeats, variant):
+  """A whole training step, and the renderer's share of it, in this process."""
+  import dataclasses
+
+  import jax
+  import jax.numpy as jnp
+
+  from configs import train_lego
+  from mfsample import RenderSettings, render
+  from mfsample.model import mean_gaussians
+  from mfsample.renderer.budget import fit_budget, render_with_budget
+  from mfsample.train import data as data_lib
+  from mfsample.train import loop
+  from mfsample.train.step import make_train_step
+
+  config = train_lego.get_config()
+  config.model.init_points = _STEP_POINTS.value
+  config.data.path = _DATA.value
+  config.data.downscale = max(800 // _STEP_SIZE.value, 1)
+  config.densify.start = 10**9  # the jitted step alone
+  config.train.progress = False
+  if not os.path.isdir(config.data.path):
+    config.data.kind = "synthetic"
+    config.data.init_bounds = (-0.8, 0.8)
+    syn = config.data.synthetic
+    syn.num_gaussians, syn.width, syn.height = 2000, _STEP_SIZE.value, _STEP_SIZE.value
+    syn.sh_degree, syn.num_train, syn.num_test = 3, 4, 1
+  dataset = data_lib.load_dataset(config.data)
+  views = data_lib.to_device(dataset.train)
+  setup = loop.make_setup(config, dataset.train)
+  state = loop.init_state(config, setup, dataset.bounds)
+  base = setup.step_config.settings
+  fields = {f.name: getattr(base, f.name) for f in dataclasses.fields(base)
+            if f.name != "max_intersections"}
+  settings = RenderSettings.holding(base.max_intersections, **{**fields, **variant})
+
+  def step_fn(settings):
+    step_config = dataclasses.replace(setup.step_config, settings=settings)
+    return make_train_step(step_config), step_config.num_samples
+
+  fn, m = step_fn(settings)
+  view = jnp.int32(0)
+
+  def one_step():
+    return fn(state, views.images, views.cameras, view, setup.sobol[:m])
+
+  while True:  # grow the budget as the training loop does
+    _, metrics = one_step()
+    if not bool(metrics.overflow):
+      break
+    settings = fit_budget(settings, metrics)
+    fn, m = step_fn(settings)
+  gaussians = mean_gaussians(state.model)
+  camera = jax.tree.map(lambda x: x[0], views.cameras)
+  image = views.images[0]
+  out, render_settings = render_with_budget(render, settings, gaussians, camera)
+
+  def loss(g, cam):
+    return jnp.mean(jnp.abs(render(g, cam, settings=render_settings).rgb - image))
+
+  # allow_int: the live mask is a leaf of the Gaussians (its cotangent is float0).
+  backward = jax.jit(jax.value_and_grad(loss, argnums=(0, 1), allow_int=True))
+  step_ms = _median_ms(one_step, repeats)
+  render_ms = _median_ms(lambda: backward(gaussians, camera), repeats)
+  _trace(one_step, f"step_{_label(variant)}")
+  return {
+      "cell": STEP_CELL,
+      "variant": variant,
+      "num_gaussians": int(state.model.capacity),
+      "resolution": int(views.images.shape[1]),
+      "samples_per_step": int(m),
+      "budget": settings.max_intersections,
+      "intersections": int(out.stats.num_intersections),
+      "step_ms": step_ms,
+      "forward_backward_ms": render_ms,
+      # The step renders its M samples forward and backward; the rest is outside.
+      "outside_renderer_share": 1.0 - m * render_ms / step_ms,
+      "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+  }
+
+
+def _interpreted(row, machine):
+  return row["variant"]["compositor"] == "pallas" and machine["backend"] == "cpu"
+
+
+def _table(rows, machine):
+  """Times per cell and variant (medians over rounds) and ratios to the cell's first."""
+  lines = ["| cell | variant | intersections | fwd ms | fwd+bwd ms | fwd x first "
+           "| fwd+bwd x first | step ms | outside renderer | peak RSS MB "
            "| dense fwd / fwd+bwd (x slower) |",
-           "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+           "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
   for r in rows:
+    def fmt(key, spec=".1f", r=r):
+      return format(r[key], spec) if r.get(key) is not None else "-"
+
     dense = "-"
     if "dense_forward_ms" in r:
       dense = (f"{r['dense_forward_ms'] / r['forward_ms']:.1f}x / "
                f"{r['dense_forward_backward_ms'] / r['forward_backward_ms']:.1f}x")
-    xla = "-" if r["xla_backward_bytes"] is None else f"{r['xla_backward_bytes'] / 2**20:.0f}"
+    label = _label(r["variant"]) + (" (interpreted)" if _interpreted(r, machine) else "")
     lines.append(
-        f"| {r['num_gaussians']} | {r['resolution']}^2 | {r.get('chunks_per_step', 16)} "
-        f"| {r['intersections']} "
-        f"| {r['forward_ms']:.1f} | {r['forward_backward_ms']:.1f} "
-        f"| {1e3 * r['forward_backward_ms'] / max(r['intersections'], 1):.2f} "
-        f"| {r['peak_rss_mb']:.0f} | {xla} | {dense} |")
+        f"| {r['cell']} | {label} | {r['intersections']} | {fmt('forward_ms')} "
+        f"| {fmt('forward_backward_ms')} | {fmt('forward_ratio', '.3f')} "
+        f"| {fmt('forward_backward_ratio', '.3f')} | {fmt('step_ms')} "
+        f"| {fmt('outside_renderer_share', '.0%')} | {fmt('peak_rss_mb', '.0f')} | {dense} |")
   return "\n".join(lines)
+
+
+def _summarise(rounds, variants):
+  """Per cell and variant: median times over rounds and median per-round ratios to the
+  cell's first variant."""
+  rows = []
+  keys = ("forward_ms", "forward_backward_ms", "step_ms")
+  for cell in dict.fromkeys(cell for cell, _ in rounds[0]):
+    for v in range(len(variants)):
+      runs = [rnd[(cell, v)] for rnd in rounds]
+      row = dict(runs[0])
+      for key in keys:
+        if key in row:
+          row[key] = statistics.median(run[key] for run in runs)
+      for key, ratio_key in (("forward_ms", "forward_ratio"),
+                             ("forward_backward_ms", "forward_backward_ratio"),
+                             ("step_ms", "step_ratio")):
+        if key in row:
+          row[ratio_key] = statistics.median(rnd[(cell, v)][key] / rnd[(cell, 0)][key]
+                                             for rnd in rounds)
+      row["rounds"] = runs
+      rows.append(row)
+  return rows
 
 
 def _linear_fit(rows, key):
@@ -141,42 +333,65 @@ def _linear_fit(rows, key):
   return {"intercept_ms": a, "ms_per_1k_intersections": 1e3 * b, "r2": r2}
 
 
+def _child_main():
+  variant = json.loads(_VARIANT.value)
+  if _ONE.value == STEP_CELL:
+    result = run_step(_REPEATS.value, variant)
+  else:
+    result = run_cell(_ONE.value, _REPEATS.value, variant, _DENSE.value)
+  result["machine"] = _machine()
+  print("RESULT " + json.dumps(result))
+
+
 def main(argv):
   del argv
   if _ONE.value:
-    print("RESULT " + json.dumps(run_cell(_ONE.value, _REPEATS.value,
-                                          int(_CHUNKS_PER_STEP.value[0]))))
+    _child_main()
     return
-  cells = _CELLS.value or (QUICK_CELLS if _QUICK.value else FULL_CELLS)
-  rows = []
-  for cell in cells:
-    for chunks_per_step in _CHUNKS_PER_STEP.value:
-      print(f"[bench] {cell}, {chunks_per_step} chunks per step ...", flush=True)
-      proc = subprocess.run(
-          [sys.executable, __file__, f"--one_cell={cell}", f"--repeats={_REPEATS.value}",
-           f"--chunks_per_step={chunks_per_step}"],
-          capture_output=True, text=True, check=False)
-      line = [x for x in proc.stdout.splitlines() if x.startswith("RESULT ")]
-      if proc.returncode or not line:
-        print(proc.stdout[-2000:], proc.stderr[-4000:], file=sys.stderr)
-        raise SystemExit(f"cell {cell} failed")
-      rows.append(json.loads(line[0][len("RESULT "):]))
-      print(_table(rows[-1:]).splitlines()[-1], flush=True)
+  cells = ([STEP_CELL] if _STEP.value
+           else _CELLS.value or (QUICK_CELLS if _QUICK.value else FULL_CELLS))
+  variants = _variants()
+  env = dict(os.environ, PYTHONPATH=os.pathsep.join([".", os.environ.get("PYTHONPATH", "")]))
+  passthrough = [f"--repeats={_REPEATS.value}", f"--clock={_CLOCK.value}",
+                 f"--step_size={_STEP_SIZE.value}",
+                 f"--step_points={_STEP_POINTS.value}", f"--data={_DATA.value}"]
+  if _TRACE.value:
+    passthrough.append(f"--trace_dir={_TRACE.value}")
+  rounds, machine = [], None
+  for r in range(_ROUNDS.value):
+    results = {}
+    for cell in cells:
+      for v, variant in enumerate(variants):
+        print(f"[bench] round {r + 1}/{_ROUNDS.value}, {cell}, {_label(variant)} ...",
+              flush=True)
+        dense = _DENSE.value and r == 0 and v == 0
+        proc = subprocess.run(
+            [sys.executable, __file__, f"--one_cell={cell}", f"--variant={json.dumps(variant)}",
+             f"--dense={dense}", *passthrough],
+            capture_output=True, text=True, check=False, env=env)
+        line = [x for x in proc.stdout.splitlines() if x.startswith("RESULT ")]
+        if proc.returncode or not line:
+          print(proc.stdout[-2000:], proc.stderr[-4000:], file=sys.stderr)
+          raise SystemExit(f"cell {cell} ({_label(variant)}) failed")
+        res = json.loads(line[0][len("RESULT "):])
+        machine = res.pop("machine")
+        res["load_before"] = os.getloadavg()[0] if hasattr(os, "getloadavg") else None
+        results[(cell, v)] = res
+    rounds.append(results)
 
-  import jax
-
-  summary = {
-      "machine": {"platform": platform.platform(), "cpu_count": os.cpu_count(),
-                  "jax": jax.__version__, "device": str(jax.devices()[0])},
-      "cells": rows,
-  }
-  # Time against intersections at one loop setting (the first asked for).
-  fitted = [r for r in rows if r["chunks_per_step"] == int(_CHUNKS_PER_STEP.value[0])]
+  rows = _summarise(rounds, variants)
+  summary = {"machine": machine, "variants": variants, "rounds": _ROUNDS.value,
+             "clock": _CLOCK.value, "cells": rows}
+  # Time against intersections for the first variant, over the cells.
+  fitted = [r for r in rows if r["variant"] == variants[0] and r["cell"] != STEP_CELL]
   if len(fitted) >= 3:
     summary["fit_forward"] = _linear_fit(fitted, "forward_ms")
     summary["fit_forward_backward"] = _linear_fit(fitted, "forward_backward_ms")
   print()
-  print(_table(rows))
+  print(f"{machine['device_kind']} ({machine['backend']}), jax {machine['jax']}; "
+        f"{_CLOCK.value} clock; {_ROUNDS.value} round(s); 'x first': time / the cell's first "
+        "variant's time, median of the per-round ratios")
+  print(_table(rows, machine))
   for key in ("fit_forward", "fit_forward_backward"):
     if key in summary:
       f = summary[key]
@@ -186,10 +401,10 @@ def main(argv):
   write_json(_OUT.value, summary)
   print(f"saved {_OUT.value}")
   if "fit_forward" in summary:
-    _plot(summary, os.path.splitext(_OUT.value)[0] + ".png")
+    _plot(summary, fitted, os.path.splitext(_OUT.value)[0] + ".png")
 
 
-def _plot(summary, path):
+def _plot(summary, rows, path):
   """Time against intersections, with the linear fits: the scaling claim as a picture."""
   try:
     import matplotlib
@@ -201,8 +416,6 @@ def _plot(summary, path):
     return
   import numpy as np
 
-  first = summary["cells"][0]["chunks_per_step"]
-  rows = [r for r in summary["cells"] if r["chunks_per_step"] == first]  # those fitted
   x = np.array([r["intersections"] for r in rows], float)
   fig, ax = plt.subplots(figsize=(6, 4))
   for key, fit_key, label in (("forward_ms", "fit_forward", "forward"),

@@ -1,42 +1,51 @@
 """Speed against accuracy for the knobs a user turns, measured on trained lego models.
 
-Every curve pairs a time with an accuracy, in one process on one machine:
+Every curve pairs a time with an accuracy, both measured in this process:
 
 * samples M of U (Eq. 10): time per candidate vs the relative error of U and the rank
   correlation of the candidates' U with a many-sample reference (scrambled Sobol z,
   several scramblings);
 * scoring resolution (`strategy.score_downscale`): time per candidate vs the rank
   correlation of the candidates' U with U at full resolution (same z);
-* SH degree: forward render time vs test PSNR of a trained degree-3 model cut to its first
+* SH degree: forward render time vs test PSNR of a trained model cut to its first
   (d + 1)^2 coefficients (truncation, not retraining: an upper bound on the loss);
 * Gaussian budget: forward render time vs test PSNR when only the K most opaque Gaussians
   are kept (pruning, not retraining).
-Both render compact arrays (live Gaussians only, only the SH bands kept), so the time
-is what a model of that size costs;
-* rank k and the sampler kind: read from `results/train_step.json` (ms per step, peak
-  memory) when `benchmarks/train_step.py` has been run.
+Both rendering curves render compact arrays (live Gaussians only, only the SH bands kept),
+so the time is what a model of that size costs. Times are medians of repeated calls after
+a compiling call. Rank k and the sampler kind are read from `benchmarks/train_step.py`'s
+JSON (ms per step, peak memory) and copied into this one.
 
-The trained models are the lego runs of `benchmarks/train_quality.py` (`--size=100`):
+The trained models come from `benchmarks/train_quality.py`:
 
+  PYTHONPATH=. python benchmarks/train_quality.py --size=100 --steps=5000 \
+      --variants=deterministic,rank2_every_step --workdir=workdirs/benchmarks/quality100
+  PYTHONPATH=. python benchmarks/train_step.py --rounds=3
   PYTHONPATH=. python benchmarks/tradeoffs.py \
-      --stochastic=workdirs/quality100/rank2_every_step \
-      --deterministic=workdirs/quality100/deterministic
+      --stochastic=workdirs/benchmarks/quality100/rank2_every_step \
+      --deterministic=workdirs/benchmarks/quality100/deterministic
 """
 
+import functools
 import json
 import os
-import platform
 import statistics
 import time
 
 from absl import app, flags
 
 _STOCHASTIC = flags.DEFINE_string(
-    "stochastic", "workdirs/quality100/rank2_every_step",
-    "Workdir of a rank-2 lego run that sampled at every step (its B_hat is trained).")
-_DETERMINISTIC = flags.DEFINE_string("deterministic", "workdirs/quality100/deterministic",
-                                     "Workdir of a trained deterministic lego run.")
-_DATA = flags.DEFINE_string("data", "../shared/data/lego", "NeRF Synthetic lego folder.")
+    "stochastic", "workdirs/benchmarks/train_quality/rank2_every_step",
+    "Workdir of a rank-2 lego run that sampled at every step (its B_hat is trained): "
+    "benchmarks/train_quality.py's rank2_every_step.")
+_DETERMINISTIC = flags.DEFINE_string(
+    "deterministic", "workdirs/benchmarks/train_quality/deterministic",
+    "Workdir of a trained deterministic lego run: benchmarks/train_quality.py's deterministic.")
+_TRAIN_STEP = flags.DEFINE_string(
+    "train_step", "workdirs/benchmarks/train_step.json",
+    "JSON of benchmarks/train_step.py (rank and sampler kind); '' to leave them out.")
+_DATA = flags.DEFINE_string("data", "data/nerf_synthetic/lego",
+                            "NeRF Synthetic lego folder (the runs' test views).")
 _CANDIDATES = flags.DEFINE_integer("candidates", 12, "Candidate cameras (train views).")
 _SAMPLES = flags.DEFINE_list("samples", ["2", "4", "8", "16"], "M values to measure.")
 _REFERENCE_M = flags.DEFINE_integer("reference_samples", 32, "M of the reference U.")
@@ -45,20 +54,39 @@ _DOWNSCALES = flags.DEFINE_list("downscales", ["1", "2", "4"], "Scoring downscal
 _TEST_VIEWS = flags.DEFINE_integer("test_views", 25, "Test views for the PSNR curves.")
 _KEEP = flags.DEFINE_list("keep", ["1.0", "0.5", "0.25", "0.125"],
                           "Fractions of the Gaussians kept (most opaque first).")
-_OUT = flags.DEFINE_string("out", "results/tradeoffs.json", "JSON output.")
-_PLOT = flags.DEFINE_string("plot", "results/tradeoffs.png", "Figure ('' to skip).")
+_OUT = flags.DEFINE_string("out", "workdirs/benchmarks/tradeoffs.json", "JSON output.")
+_PLOT = flags.DEFINE_string("plot", "workdirs/benchmarks/tradeoffs.png", "Figure ('' to skip).")
 
 
-def _load_run(workdir):
-  """(config, dataset, model, settings) of the newest checkpoint of a training workdir."""
+def check_run(workdir, flag):
+  """Raises FileNotFoundError naming `flag` unless `workdir` holds a finished training run."""
+  from mfsample.train import checkpoint as ckpt
+
+  config = os.path.join(workdir, "config.json")
+  if not os.path.isfile(config) or not ckpt.list_checkpoints(os.path.join(workdir,
+                                                                           "checkpoints")):
+    raise FileNotFoundError(
+        f"{flag}={workdir!r} holds no trained run (missing {config} or checkpoints/). "
+        "Train one with benchmarks/train_quality.py (see this script's docstring) or point "
+        f"{flag} at a workdir of experiments/train.py.")
+
+
+def load_run(workdir, data=None):
+  """(dataset, model, render settings) of the newest checkpoint of a training workdir.
+
+  `data` replaces the run's `config.data.path` when the run trained on NeRF Synthetic.
+  """
   import ml_collections
 
+  from mfsample._bench import require_scene_folder
   from mfsample.train import data as data_lib
   from mfsample.train import loop
 
   with open(os.path.join(workdir, "config.json")) as f:
     config = ml_collections.ConfigDict(json.load(f))
-  config.data.path = _DATA.value
+  if config.data.kind == "blender" and data is not None:
+    require_scene_folder(data, "--data")
+    config.data.path = data
   dataset = data_lib.load_dataset(config.data)
   setup = loop.make_setup(config, dataset.train)
   restored = loop.restore_latest(config, setup, dataset.bounds,
@@ -66,11 +94,22 @@ def _load_run(workdir):
   if restored is None:
     raise FileNotFoundError(f"no checkpoint in {workdir}/checkpoints")
   state, setup, _ = restored
-  return config, dataset, state.model, setup.step_config.settings
+  return dataset, state.model, setup.step_config.settings
 
 
-def _timed(fn, repeats=3):
-  """(result, median seconds) of `fn()` after one untimed call (compilation)."""
+def read_train_step(path, flag="--train_step"):
+  """{path, machine, table} of `benchmarks/train_step.py`'s JSON at `path`."""
+  if not os.path.isfile(path):
+    raise FileNotFoundError(f"{flag}={path!r} does not exist: run "
+                            f"benchmarks/train_step.py --out={path} first, or pass {flag}= "
+                            "to leave rank and sampler out.")
+  with open(path) as f:
+    record = json.load(f)
+  return {"path": path, "machine": record.get("machine"), "table": record["table"]}
+
+
+def timed(fn, repeats=3):
+  """(result, median seconds) of `fn()` over `repeats` calls after one untimed call."""
   import jax
 
   out = jax.block_until_ready(fn())
@@ -103,40 +142,58 @@ def _scores(model, cameras, z, settings, background):
   return np.asarray(values), settings
 
 
-def _time_one_candidate(model, camera, z, settings, background):
+def _ms_one_candidate(model, camera, z, settings, background, repeats):
   from mfsample import uncertainty as unc
 
-  return _timed(lambda: unc.uncertainty(model, camera, z, settings=settings,
-                                        background=background).value)[1]
+  return 1e3 * timed(lambda: unc.uncertainty(model, camera, z, settings=settings,
+                                             background=background).value, repeats)[1]
 
 
-def samples_and_resolution(workdir):
+def samples_and_resolution(model, dataset, settings, *, candidates, samples, reference_samples,
+                           scrambles, downscales, repeats=3):
+  """U's accuracy and cost against M and against the scoring resolution.
+
+  Args:
+    model: a trained stochastic `Model`.
+    dataset: its `Dataset`; `candidates` of its training cameras, evenly spaced, are scored.
+    settings: starting `RenderSettings` (grown on overflow).
+    candidates: number of candidate cameras.
+    samples: the M to measure.
+    reference_samples: M of the reference U (Sobol seed 10000).
+    scrambles: Sobol scramblings (seeds 0..scrambles-1) per M.
+    downscales: scoring downscale factors (1 = full resolution), M = 2, Sobol seed 0.
+    repeats: timed calls per time (median).
+
+  Returns:
+    {live_gaussians, resolution, candidates, reference_samples,
+     samples: [{M, ms_per_candidate, median_relative_error (|U - U_ref| / U_ref over
+       candidates and scramblings), spearman_vs_reference (mean over scramblings)}],
+     downscales: [{downscale, resolution, ms_per_candidate, spearman_vs_full}]}.
+  """
   import jax.numpy as jnp
   import numpy as np
 
   from mfsample import uncertainty as unc
   from mfsample.planning.poses import downscale_camera
 
-  _, dataset, model, settings = _load_run(workdir)
   bg = jnp.asarray(dataset.background, jnp.float32)
   train = dataset.train
-  idx = np.linspace(0, len(train) - 1, _CANDIDATES.value).round().astype(int)
+  idx = np.linspace(0, len(train) - 1, candidates).round().astype(int)
   cams = train.cameras[idx]
-  ref_z = unc.uncertainty_z(model, _REFERENCE_M.value, seed=10_000)
+  ref_z = unc.uncertainty_z(model, reference_samples, seed=10_000)
   ref, settings = _scores(model, cams, ref_z, settings, bg)
-  out = {"run": workdir, "live_gaussians": model.num_live, "resolution": cams.width,
-         "candidates": len(idx), "reference_samples": _REFERENCE_M.value, "samples": [],
-         "downscales": []}
-  for m in map(int, _SAMPLES.value):
+  out = {"live_gaussians": model.num_live, "resolution": cams.width, "candidates": len(idx),
+         "reference_samples": reference_samples, "samples": [], "downscales": []}
+  for m in map(int, samples):
     errors, rhos = [], []
-    for seed in range(_SCRAMBLES.value):
+    for seed in range(scrambles):
       z = unc.uncertainty_z(model, m, seed=seed)
       values, settings = _scores(model, cams, z, settings, bg)
       errors.extend(np.abs(values - ref) / ref)
       rhos.append(_spearman(values, ref))
     z = unc.uncertainty_z(model, m, seed=0)
-    seconds = _time_one_candidate(model, cams[0], z, settings, bg)
-    row = {"M": m, "ms_per_candidate": 1e3 * seconds,
+    row = {"M": m, "ms_per_candidate": _ms_one_candidate(model, cams[0], z, settings, bg,
+                                                         repeats),
            "median_relative_error": float(np.median(errors)),
            "spearman_vs_reference": float(np.mean(rhos))}
     out["samples"].append(row)
@@ -146,11 +203,11 @@ def samples_and_resolution(workdir):
 
   z = unc.uncertainty_z(model, 2, seed=0)
   full, settings = _scores(model, cams, z, settings, bg)
-  for d in map(int, _DOWNSCALES.value):
+  for d in map(int, downscales):
     small = downscale_camera(cams, d)
     values, _ = _scores(model, small, z, settings, bg)
-    seconds = _time_one_candidate(model, small[0], z, settings, bg)
-    row = {"downscale": d, "resolution": small.width, "ms_per_candidate": 1e3 * seconds,
+    row = {"downscale": d, "resolution": small.width,
+           "ms_per_candidate": _ms_one_candidate(model, small[0], z, settings, bg, repeats),
            "spearman_vs_full": _spearman(values, full)}
     out["downscales"].append(row)
     print(f"[resolution] {small.width:4d}^2: {row['ms_per_candidate']:7.1f} ms/candidate, "
@@ -158,15 +215,19 @@ def samples_and_resolution(workdir):
   return out
 
 
-def _downscaled(cameras, d):
-  from mfsample.planning.poses import downscale_cameras
-
-  return downscale_cameras(cameras, d)
-
-
-def _psnr_and_time(gaussians, views, settings, background):
-  """Mean test PSNR of `gaussians` and the median forward render time of one view (ms)."""
+@functools.cache
+def _forward_rgb():
+  """The jitted forward render, image only (what a viewer computes), settings static."""
   import jax
+
+  from mfsample.renderer import render
+
+  return jax.jit(lambda g, camera, background, settings: render(
+      g, camera, background=background, settings=settings).rgb, static_argnames=("settings",))
+
+
+def _psnr_and_ms(gaussians, views, settings, background, repeats):
+  """Mean PSNR of `gaussians` over `views` and the median forward render time of one (ms)."""
   import jax.numpy as jnp
   import numpy as np
 
@@ -174,16 +235,17 @@ def _psnr_and_time(gaussians, views, settings, background):
   from mfsample.renderer import render
   from mfsample.renderer.budget import render_with_budget
 
-  psnrs = []
+  # Timed with the smallest budget that fits the first view (the forward cost grows with
+  # the budget); the other views grow it where they need more.
+  timing = render_with_budget(render, settings.replace(max_intersections=1024), gaussians,
+                              views.cameras[0], background=background)[1]
+  fn, camera = _forward_rgb(), views.cameras[0]
+  seconds = timed(lambda: fn(gaussians, camera, background, settings=timing), repeats)[1]
+  psnrs, settings = [], timing
   for i in range(len(views)):
     out, settings = render_with_budget(render, settings, gaussians, views.cameras[i],
                                        background=background)
     psnrs.append(float(metrics.psnr(jnp.clip(out.rgb, 0, 1), jnp.asarray(views.images[i]))))
-  # Time with the smallest budget that fits (the forward cost grows with the budget).
-  settings = render_with_budget(render, settings.replace(max_intersections=1024), gaussians,
-                                views.cameras[0], background=background)[1]
-  fn = jax.jit(lambda g, c: render(g, c, background=background, settings=settings).rgb)
-  seconds = _timed(lambda: fn(gaussians, views.cameras[0]), repeats=15)[1]
   return float(np.mean(psnrs)), 1e3 * seconds
 
 
@@ -196,43 +258,50 @@ def _rows(gaussians, index):
   return jax.tree.map(lambda x: x[index], replace(gaussians, mask=None))
 
 
-def sh_and_budget(workdir):
-  """Test PSNR and forward time of compact models: fewer SH bands, fewer Gaussians."""
+def sh_and_budget(model, dataset, settings, *, test_views, keep, repeats=15):
+  """Test PSNR and forward time of compact models: fewer SH bands, fewer Gaussians.
+
+  Args:
+    model: a trained `Model` (its mean is rendered).
+    dataset: its `Dataset`; `test_views` evenly spaced test views are rendered.
+    settings: the run's `RenderSettings` (the budget is refitted from 1024 intersections
+      per model, and grown on overflow).
+    test_views: number of test views for the PSNR.
+    keep: fractions of the live Gaussians kept, the most opaque first.
+    repeats: timed calls per time (median).
+
+  Returns:
+    {live_gaussians, test_views, resolution,
+     sh_degree: [{degree, psnr, forward_ms}] from the model's degree down to 0,
+     keep: [{fraction, gaussians, psnr, forward_ms}]}.
+  """
   import jax.numpy as jnp
   import numpy as np
 
   from mfsample._pytree import replace
   from mfsample.model import mean_gaussians
 
-  _, dataset, model, settings = _load_run(workdir)
   bg = jnp.asarray(dataset.background, jnp.float32)
   test = dataset.test
-  idx = np.linspace(0, len(test) - 1, min(_TEST_VIEWS.value, len(test))).round().astype(int)
+  idx = np.linspace(0, len(test) - 1, min(test_views, len(test))).round().astype(int)
   test = test.subset(list(idx))
   live = np.flatnonzero(np.asarray(model.mask))
-  full = _rows(mean_gaussians(model), live)  # the live Gaussians only, degree 3
-  out = {"run": workdir, "live_gaussians": len(live), "test_views": len(test),
+  full = _rows(mean_gaussians(model), live)  # the live Gaussians only, every SH band
+  out = {"live_gaussians": len(live), "test_views": len(test),
          "resolution": test.cameras.width, "sh_degree": [], "keep": []}
   for degree in range(model.max_sh_degree, -1, -1):
     g = replace(full, sh=full.sh[:, :(degree + 1) ** 2])  # the bands a degree-d model holds
-    psnr, ms = _psnr_and_time(g, test, settings, bg)
+    psnr, ms = _psnr_and_ms(g, test, settings, bg, repeats)
     out["sh_degree"].append({"degree": degree, "psnr": psnr, "forward_ms": ms})
     print(f"[sh] degree {degree}: PSNR {psnr:.2f} dB, forward {ms:.1f} ms", flush=True)
   opacity = np.asarray(model.params.mean["opacity_logits"]).reshape(-1)[live]
   order = np.argsort(-opacity)  # most opaque first
-  for frac in map(float, _KEEP.value):
+  for frac in map(float, keep):
     k = max(int(round(frac * len(live))), 1)
-    psnr, ms = _psnr_and_time(_rows(full, np.sort(order[:k])), test, settings, bg)
+    psnr, ms = _psnr_and_ms(_rows(full, np.sort(order[:k])), test, settings, bg, repeats)
     out["keep"].append({"fraction": frac, "gaussians": k, "psnr": psnr, "forward_ms": ms})
     print(f"[budget] {k:6d} Gaussians: PSNR {psnr:.2f} dB, forward {ms:.1f} ms", flush=True)
   return out
-
-
-def rank_from_train_step(path="results/train_step.json"):
-  if not os.path.exists(path):
-    return None
-  with open(path) as f:
-    return json.load(f)
 
 
 def _curve(ax, rows, x, y, label, **axis):
@@ -243,7 +312,8 @@ def _curve(ax, rows, x, y, label, **axis):
   ax.set(**axis)
 
 
-def _plot(results, path):
+def plot(results, path):
+  """The four curves of `results` (this script's JSON) side by side, saved to `path`."""
   import matplotlib
 
   matplotlib.use("Agg")
@@ -264,27 +334,41 @@ def _plot(results, path):
          xlabel="forward render ms", ylabel="test PSNR (dB)",
          title="Gaussian budget (pruned)")
   fig.tight_layout()
+  os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
   fig.savefig(path, dpi=110)
-  print(f"saved {path}")
+  plt.close(fig)
 
 
 def main(argv):
   del argv
-  import jax
-
-  started = time.time()
-  results = {"machine": {"platform": platform.platform(), "cpus": os.cpu_count(),
-                         "backend": jax.default_backend()},
-             "uncertainty": samples_and_resolution(_STOCHASTIC.value),
-             "rendering": sh_and_budget(_DETERMINISTIC.value),
-             "rank": rank_from_train_step(),
-             }
-  results["seconds"] = time.time() - started
+  from mfsample._bench import machine
   from mfsample._json import write_json
+
+  # Every input is checked before the long measurements start.
+  try:
+    check_run(_STOCHASTIC.value, "--stochastic")
+    check_run(_DETERMINISTIC.value, "--deterministic")
+    rank = read_train_step(_TRAIN_STEP.value) if _TRAIN_STEP.value else None
+  except FileNotFoundError as error:
+    raise app.UsageError(str(error)) from error
+  started = time.time()
+  dataset, model, settings = load_run(_STOCHASTIC.value, _DATA.value)
+  uncertainty = samples_and_resolution(
+      model, dataset, settings, candidates=_CANDIDATES.value, samples=_SAMPLES.value,
+      reference_samples=_REFERENCE_M.value, scrambles=_SCRAMBLES.value,
+      downscales=_DOWNSCALES.value)
+  dataset, model, settings = load_run(_DETERMINISTIC.value, _DATA.value)
+  rendering = sh_and_budget(model, dataset, settings, test_views=_TEST_VIEWS.value,
+                            keep=_KEEP.value)
+  results = {"machine": machine(),
+             "uncertainty": {"run": _STOCHASTIC.value, **uncertainty},
+             "rendering": {"run": _DETERMINISTIC.value, **rendering},
+             "rank": rank, "seconds": time.time() - started}
   write_json(_OUT.value, results)
   print(f"saved {_OUT.value}")
   if _PLOT.value:
-    _plot(results, _PLOT.value)
+    plot(results, _PLOT.value)
+    print(f"saved {_PLOT.value}")
 
 
 if __name__ == "__main__":

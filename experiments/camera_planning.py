@@ -5,7 +5,9 @@
 
 Writes results.json, table.md (the paper's Table 1 layout), cameras.png and landscape.png
 to the workdir. Running again on the same workdir skips the (strategy, seed) runs already
-done, so an interrupted call resumes, and more seeds or strategies can be added later.
+done, so an interrupted call resumes, and more seeds or strategies can be added later; a
+workdir whose runs used another protocol is refused, and nothing is written before the config
+is validated (docs/reliability.md).
 """
 
 from absl import app, flags

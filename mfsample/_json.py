@@ -1,17 +1,58 @@
-"""Result files: JSON written whole or not at all."""
+"""Result files written whole or not at all: JSON, text, and any writer given a path.
 
+Every file a run writes goes through `atomic_path`: the writer fills a temporary file in the
+same folder, which is flushed to disk and renamed over the target (`os.replace`, atomic on
+POSIX). A run killed mid-write leaves the previous file, never a truncated one, and a writer
+that raises leaves no temporary file behind.
+"""
+
+import contextlib
 import json
 import os
+
+
+@contextlib.contextmanager
+def atomic_path(path):
+  """Yields a temporary path beside `path`; on success it replaces `path` atomically.
+
+  The temporary name keeps the extension ("table.tmp.md"), so writers that choose the
+  format by extension (matplotlib, imageio, numpy) write the intended format. The folder of
+  `path` is created if missing.
+
+    with atomic_path("out/cameras.png") as tmp:
+      fig.savefig(tmp)
+  """
+  path = os.fspath(path)
+  os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
+  root, ext = os.path.splitext(path)
+  tmp = f"{root}.tmp{ext}"
+  try:
+    yield tmp
+    with open(tmp, "rb+") as f:  # flushed before the rename: no empty file after a crash
+      os.fsync(f.fileno())
+    os.replace(tmp, path)
+  finally:
+    if os.path.exists(tmp):
+      os.remove(tmp)
+
+
+@contextlib.contextmanager
+def atomic_open(path, mode="w", **kwargs):
+  """`open(path, mode)` whose content appears at `path` only once it is closed without error."""
+  with atomic_path(path) as tmp, open(tmp, mode, **kwargs) as f:
+    yield f
+
+
+def write_text(path, text):
+  """Writes the string `text` to `path` atomically (UTF-8)."""
+  with atomic_open(path, "w", encoding="utf-8") as f:
+    f.write(text)
 
 
 def write_json(path, obj, indent=2):
   """Writes `obj` to `path` as JSON, creating its folder; atomic (a temporary file renamed),
   so a run killed mid-write leaves the previous file, never a truncated one."""
-  os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
-  tmp = f"{path}.tmp"
-  with open(tmp, "w") as f:
-    json.dump(obj, f, indent=indent)
-  os.replace(tmp, path)
+  write_text(path, json.dumps(obj, indent=indent))
 
 
 def without_fields(d, dotted_fields):

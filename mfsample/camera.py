@@ -12,11 +12,32 @@ Conventions (shared by the renderer, the dataset loaders and the capture oracle)
 A `Camera` is a pytree: `world_to_camera`, `fx`, `fy`, `cx`, `cy` are differentiable leaves
 (with optional leading batch axes, so a batch of cameras is one `Camera`), `width` and
 `height` are static metadata.
+
+Validity. A camera is *valid* when its pose is finite and rigid (a rotation: R^T R = I and
+det R = +1 within `RIGID_TOLERANCE`, so neither scaled, sheared nor reflected; bottom row
+[0, 0, 0, 1]) and its intrinsics are finite with fx, fy > 0.
+
+* Eagerly (concrete values), the constructors `create`, `look_at` and `from_blender` raise
+  `InvalidCameraError` naming the field, the batch index and what is wrong.
+* Under `jit`, `vmap` or `grad` the values are unknown when the constructors run, so they
+  check nothing (no host sync, nothing that breaks tracing). `camera.valid` is the same test
+  as a boolean array of the batch shape, for jitted callers to branch on, and `render`
+  returns NaN images for an invalid camera, so that every finiteness check downstream
+  catches it (see `mfsample.renderer.render`).
+* The plain constructor `Camera(...)` checks shapes only: JAX also calls it to rebuild
+  cameras whose leaves are not poses (gradients, tangents, `jax.tree.map` results).
+
+Why a flag and not `checkify`: a `checkify.check` inside a jitted function fails to trace
+unless every caller up the stack wraps its function with `checkify.checkify`, which the
+pose optimisation, the candidate scoring and the training step (and user code) would all
+have to do; a boolean is free, composes with `vmap`, and NaN images reach the checks that
+already exist.
 """
 
 import math
 
 import chex
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -25,6 +46,15 @@ from mfsample._pytree import pytree_dataclass, static_field
 
 # Blender / OpenGL camera axes (x right, y up, z backward) -> OpenCV axes.
 _GL_TO_CV = np.diag([1.0, -1.0, -1.0, 1.0])
+
+# A pose is rigid when max |R^T R - I|, |det R - 1| and the bottom row's distance to
+# [0, 0, 0, 1] stay below this. Poses stored or composed in float32 are rigid to ~1e-6; a
+# scale of 1.001 or a shear of 1e-3 is not. (The dataset loaders use the same tolerance.)
+RIGID_TOLERANCE = 1e-3
+
+
+class InvalidCameraError(ValueError):
+  """A camera with a non-finite or non-rigid pose, or non-finite or non-positive intrinsics."""
 
 
 @pytree_dataclass
@@ -60,18 +90,33 @@ class Camera:
 
   @classmethod
   def create(cls, world_to_camera, fx, fy, cx, cy, width, height):
-    """Builds a camera from arrays, broadcasting the intrinsics to the batch shape."""
+    """Builds a camera from arrays, broadcasting the intrinsics to the batch shape.
+
+    Raises:
+      InvalidCameraError: for concrete values that are not a valid camera (see the module
+        docstring); traced values are not checked (test `camera.valid`).
+    """
     w2c = jnp.asarray(world_to_camera)
     if not jnp.issubdtype(w2c.dtype, jnp.floating):
       w2c = w2c.astype(jnp.float32)
+    if w2c.ndim < 2 or tuple(w2c.shape[-2:]) != (4, 4):
+      raise ValueError(f"Camera.world_to_camera must have shape [..., 4, 4], got {w2c.shape}.")
     batch = w2c.shape[:-2]
 
-    def intrinsic(v):
-      return jnp.broadcast_to(jnp.asarray(v, dtype=w2c.dtype), batch)
+    def intrinsic(name, v):
+      v = jnp.asarray(v, dtype=w2c.dtype)
+      try:
+        return jnp.broadcast_to(v, batch)
+      except ValueError:
+        raise ValueError(f"Camera.{name} of shape {v.shape} does not broadcast to the pose's "
+                         f"batch shape {batch}.") from None
 
     as_int = lambda v: int(v) if isinstance(v, np.integer) else v  # validated on init
-    return cls(w2c, intrinsic(fx), intrinsic(fy), intrinsic(cx), intrinsic(cy),
-               as_int(width), as_int(height))
+    camera = cls(w2c, intrinsic("fx", fx), intrinsic("fy", fy), intrinsic("cx", cx),
+                 intrinsic("cy", cy), as_int(width), as_int(height))
+    if _is_concrete(camera):
+      camera.validate()
+    return camera
 
   @classmethod
   def look_at(cls, eye, target, up, fov_x, width, height):
@@ -98,6 +143,7 @@ class Camera:
     rotation = jnp.stack([right, down, forward], axis=-2)  # rows: camera axes in world
     translation = -jnp.einsum("...ij,...j->...i", rotation, eye)
     w2c = _compose(rotation, translation)
+    _check_fov("fov_x", fov_x)
     fx = 0.5 * width / jnp.tan(0.5 * jnp.asarray(fov_x, dtype=eye.dtype))
     return cls.create(w2c, fx, fx, 0.5 * width, 0.5 * height, width, height)
 
@@ -118,9 +164,83 @@ class Camera:
     c2w_cv = c2w @ jnp.asarray(_GL_TO_CV, dtype=c2w.dtype)
     rotation = jnp.swapaxes(c2w_cv[..., :3, :3], -1, -2)
     translation = -jnp.einsum("...ij,...j->...i", rotation, c2w_cv[..., :3, 3])
+    _check_fov("camera_angle_x", camera_angle_x)
     fx = 0.5 * width / math.tan(0.5 * float(camera_angle_x))
     return cls.create(_compose(rotation, translation), fx, fx, 0.5 * width, 0.5 * height,
                       width, height)
+
+  # ---------------------------------------------------------------- validity
+
+  @property
+  def valid(self):
+    """[...] bool: finite, rigid pose and finite intrinsics with fx, fy > 0.
+
+    Pure jnp, so it works under jit / vmap / grad (no gradient flows through it).
+    """
+    w2c = self.world_to_camera
+    rot = w2c[..., :3, :3]
+    eye = jnp.eye(3, dtype=w2c.dtype)
+    ortho = jnp.max(jnp.abs(jnp.swapaxes(rot, -1, -2) @ rot - eye), axis=(-2, -1))
+    bottom = jnp.max(jnp.abs(w2c[..., 3, :] - jnp.array([0.0, 0.0, 0.0, 1.0], w2c.dtype)),
+                     axis=-1)
+    det = jnp.linalg.det(rot)
+    finite = jnp.all(jnp.isfinite(w2c), axis=(-2, -1))
+    intrinsics = [self.fx, self.fy, self.cx, self.cy]
+    finite = finite & jnp.all(jnp.stack([jnp.isfinite(v) for v in intrinsics]), axis=0)
+    # Comparisons with NaN are False, so a non-finite pose also fails the rigidity tests.
+    rigid = (ortho <= RIGID_TOLERANCE) & (jnp.abs(det - 1.0) <= RIGID_TOLERANCE) & (
+        bottom <= RIGID_TOLERANCE)
+    return jax.lax.stop_gradient(finite & rigid & (self.fx > 0) & (self.fy > 0))
+
+  def problems(self):
+    """What makes this (concrete) camera invalid: a list of messages, empty when valid.
+
+    Each message names the field and, for a batch, the first offending index. Host numpy
+    in float64; it syncs, so call it on concrete cameras only (not under jit).
+    """
+    w2c = np.asarray(self.world_to_camera, np.float64)
+    batch = w2c.shape[:-2]
+    finite = np.all(np.isfinite(w2c), axis=(-2, -1))
+    safe = np.where(finite[..., None, None], w2c, np.eye(4))  # rigidity of finite poses only
+    rot = safe[..., :3, :3]
+    ortho = np.max(np.abs(np.swapaxes(rot, -1, -2) @ rot - np.eye(3)), axis=(-2, -1))
+    det = np.linalg.det(rot)
+    bottom = np.max(np.abs(safe[..., 3, :] - [0.0, 0.0, 0.0, 1.0]), axis=-1)
+    out = []
+
+    def report(bad, message):
+      """Appends `message(index, where)` for the first index where `bad` holds."""
+      bad = np.broadcast_to(bad, batch)
+      if np.any(bad):
+        index = tuple(int(i) for i in np.argwhere(bad)[0])
+        where = f"[{', '.join(map(str, index))}]" if batch else ""
+        out.append(message(index, where))
+
+    report(~finite, lambda i, at: f"Camera.world_to_camera{at} has non-finite entries")
+    report(bottom > RIGID_TOLERANCE, lambda i, at: (
+        f"Camera.world_to_camera{at} has bottom row {w2c[i][3].tolist()}, expected "
+        "[0, 0, 0, 1]"))
+    report(det < 0, lambda i, at: (
+        f"Camera.world_to_camera{at} is a reflection (det R = {det[i]:.4f} < 0), not a "
+        "right-handed rotation"))
+    report((det >= 0) & ((ortho > RIGID_TOLERANCE) | (np.abs(det - 1.0) > RIGID_TOLERANCE)),
+           lambda i, at: (f"Camera.world_to_camera{at} is not rigid (|R^T R - I| = "
+                          f"{ortho[i]:.2e}, det R = {det[i]:.4f}; tolerance "
+                          f"{RIGID_TOLERANCE})"))
+    for name in ("fx", "fy", "cx", "cy"):
+      v = np.broadcast_to(np.asarray(getattr(self, name), np.float64), batch)
+      report(~np.isfinite(v), lambda i, at, name=name: f"Camera.{name}{at} is not finite")
+      if name in ("fx", "fy"):
+        report(v <= 0, lambda i, at, name=name, v=v: (
+            f"Camera.{name}{at} = {v[i]} must be > 0 (a focal length in pixels)"))
+    return out
+
+  def validate(self):
+    """Raises `InvalidCameraError` listing `problems()`; returns the camera when valid."""
+    problems = self.problems()
+    if problems:
+      raise InvalidCameraError("invalid camera: " + "; ".join(problems) + ".")
+    return self
 
   # ---------------------------------------------------------------- derived values
 
@@ -177,6 +297,23 @@ class Camera:
     u = self.fx[..., None] * cam[..., 0] / z_safe + self.cx[..., None]
     v = self.fy[..., None] * cam[..., 1] / z_safe + self.cy[..., None]
     return jnp.stack([u, v], axis=-1), z
+
+
+def _check_fov(name, fov):
+  """A concrete field of view must be a number in (0, pi) radians (traced ones pass)."""
+  if isinstance(fov, jax.core.Tracer):
+    return
+  try:
+    values = np.asarray(fov, np.float64)
+  except (TypeError, ValueError):
+    raise ValueError(f"{name} = {fov!r} must be a number (radians).") from None
+  if not np.all((values > 0) & (values < math.pi)):
+    raise ValueError(f"{name} = {fov!r} must be in (0, pi) radians (degrees given?).")
+
+
+def _is_concrete(camera):
+  """True when no leaf of `camera` is a tracer (construction outside jit / vmap / grad)."""
+  return not any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree.leaves(camera))
 
 
 def _compose(rotation, translation):

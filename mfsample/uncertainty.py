@@ -68,6 +68,10 @@ def sample_gaussians(model, z):
 def uncertainty_z(model, num_samples, seed=0):
   """[M, *z_shape] samples for U: the first M scrambled Sobol points (low rank; paper Sec.
   4.4) or seeded uniforms (diagonal, block); zero-size for a deterministic model."""
+  if isinstance(num_samples, bool) or not isinstance(num_samples, (int, np.integer)) or (
+      num_samples < 1):
+    raise ValueError(f"num_samples must be an integer >= 1 (M; U needs M >= 2 to be "
+                     f"non-zero), got {num_samples!r}")
   rows = None
   if model.spec.kind == "lowrank" and model.spec.stochastic:
     rows = samplers.sobol_z(num_samples, model.spec.rank, seed)
@@ -230,6 +234,10 @@ def score_cameras(model, cameras: Camera, z, *, settings: RenderSettings, backgr
   Returns:
     (`CameraScores`, the settings that sufficed).
   """
+  if not isinstance(cameras, Camera) or len(cameras.batch_shape) != 1:
+    raise ValueError("score_cameras takes a Camera batched over one axis [B], got "
+                     + (f"batch shape {cameras.batch_shape}" if isinstance(cameras, Camera)
+                        else type(cameras).__name__))
   if background is None:
     background = jnp.zeros((3,), model.params.mean["means"].dtype)
   background = jnp.asarray(background, model.params.mean["means"].dtype)

@@ -6,9 +6,10 @@ import pytest
 from absl import flags
 from ml_collections import config_flags
 
-from configs import camera_planning
+from configs import camera_planning, uncertainty_quality
 from mfsample.planning import runner
-from mfsample.planning.strategies import NAMES
+from mfsample.planning.strategies import NAMES, make_strategy
+from mfsample.quality import runner as runner_quality
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 
@@ -55,3 +56,27 @@ def test_variants_combine_in_order():
   config = camera_planning.get_config("lego,rounds2000")
   assert config.data.kind == "blender" and config.rounds.steps == 2000
   assert "ours_opt_sel" not in config.strategies  # lego has no oracle for new poses
+
+
+@pytest.mark.parametrize("variant", ["", *uncertainty_quality.VARIANTS, "candidates,lego"])
+def test_uncertainty_quality_variants_load_and_override(variant):
+  config = _load(f"uncertainty_quality.py:{variant}", "--config.ause.seeds=(3,)",
+                 "--config.candidates.samples=(2,)")
+  assert config.ause.seeds == (3,) and config.candidates.samples == (2,)
+  assert config.ause.enabled or config.candidates.enabled
+  runner_quality.check_config(config)
+  with pytest.raises(AttributeError):
+    config.ause.sampler = ("lowrank:2",)  # locked: typos are errors
+
+
+def test_ablation_overrides_change_the_round_model_of_ours_sel():
+  # docs/uncertainty_quality.md runs the paper's Table 4 as override lines of the planning
+  # config: Ours (Sel.) trains its round models with `round_train.sampler`.
+  assert make_strategy("ours_sel", camera_planning.get_config()).model_kind == "stochastic"
+  for kind, rank in (("diagonal", 2), ("block", 2), ("lowrank", 10), ("deterministic", 2)):
+    config = _load("camera_planning.py", "--config.strategies=('ours_sel',)",
+                   f"--config.round_train.sampler.kind={kind}",
+                   f"--config.round_train.sampler.rank={rank}")
+    cfg = runner.round_config(config, "stochastic")
+    assert (cfg.sampler.kind, cfg.sampler.rank) == (kind, rank)
+    assert cfg.train.num_steps == config.rounds.steps

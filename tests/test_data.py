@@ -2,6 +2,7 @@
 
 import json
 import math
+import os
 import shutil
 from pathlib import Path
 
@@ -11,15 +12,17 @@ import pytest
 
 from mfsample.camera import Camera
 from mfsample.data import (
-    DatasetError,
-    Views,
-    export_blender,
-    load_blender,
-    load_llff,
-    poses_bounds_from_cameras,
+  DatasetError,
+  Views,
+  export_blender,
+  load_blender,
+  load_llff,
+  poses_bounds_from_cameras,
 )
 
-LEGO = (Path(__file__).parents[1] / ".." / "shared" / "data" / "lego").resolve()
+# NeRF Synthetic lego (400 x 400 copies): $MFSAMPLE_LEGO, else a data folder beside the checkout.
+LEGO = Path(os.environ.get("MFSAMPLE_LEGO")
+            or Path(__file__).parents[1] / ".." / "shared" / "data" / "lego").resolve()
 needs_lego = pytest.mark.skipif(not (LEGO / "transforms_train.json").is_file(),
                                 reason=f"lego dataset not found at {LEGO}")
 

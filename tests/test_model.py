@@ -39,7 +39,7 @@ def test_group_shapes_have_no_sh_rest_at_degree_0():
   assert "sh_rest" not in group_shapes(0)
   assert group_shapes(3)["sh_rest"] == (15, 3)
   per_gaussian = sum(int(np.prod(s)) for s in group_shapes(3).values())
-  assert per_gaussian == 59  # METHOD.md: 59 channels per Gaussian at SH degree 3
+  assert per_gaussian == 59  # 59 channels per Gaussian at SH degree 3
 
 
 def test_init_model_shapes_and_mask():

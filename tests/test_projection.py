@@ -6,7 +6,12 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from mfsample import RenderSettings
-from mfsample.renderer.projection import covariance_3d, project_gaussians, quat_to_rotmat
+from mfsample.renderer.projection import (
+    covariance_3d,
+    footprint_sigma,
+    project_gaussians,
+    quat_to_rotmat,
+)
 from mfsample.testing import orbit_camera, random_gaussians
 
 SETTINGS = RenderSettings()
@@ -53,8 +58,25 @@ def test_conic_inverts_the_jacobian_projected_covariance():
     cov2 = jac @ cov3[i] @ jac.T + SETTINGS.eps2d * np.eye(2)
     a, b, c = np.asarray(proj.conics[i])
     np.testing.assert_allclose(np.array([[a, b], [b, c]]) @ cov2, np.eye(2), atol=2e-4)
+    # The footprint: r(o) = min(3.33, sqrt(2 ln(255 o))) standard deviations.
     lam = np.linalg.eigvalsh(cov2).max()
-    np.testing.assert_allclose(proj.radii[i], 3.0 * np.sqrt(lam), rtol=1e-4)
+    sigmas = min(SETTINGS.radius_sigma, np.sqrt(2 * np.log(float(g.opacities[i]) * 255)))
+    np.testing.assert_allclose(proj.radii[i], sigmas * np.sqrt(lam), rtol=1e-4)
+
+
+def test_footprint_radius_is_where_alpha_reaches_alpha_min():
+  o = jnp.array([1.0, 0.5, 0.1, 0.02, 1.0 / 255, 0.0])
+  r = np.asarray(footprint_sigma(o, SETTINGS))
+  alpha_at_r = np.asarray(o) * np.exp(-0.5 * r**2)
+  # With the default cap 3.33 > sqrt(2 ln 255) the alpha rule binds for every o <= 1: the
+  # alpha at the radius is alpha_min. The old 3-sigma rule is the cap 3.0.
+  np.testing.assert_allclose(alpha_at_r[:5], 1 / 255, rtol=1e-5)
+  np.testing.assert_allclose(r[0], np.sqrt(2 * np.log(255)), rtol=1e-6)
+  assert r[-1] == 0.0
+  old = np.asarray(footprint_sigma(o, SETTINGS.replace(radius_sigma=3.0)))
+  np.testing.assert_allclose(old, np.minimum(r, 3.0), rtol=1e-6)
+  no_alpha_cut = np.asarray(footprint_sigma(o, SETTINGS.replace(alpha_min=0.0)))
+  np.testing.assert_allclose(no_alpha_cut, 3.33, rtol=1e-7)
 
 
 def test_culling():

@@ -7,106 +7,109 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from render_testlib import (
+  BACKGROUND,
+  EXTREME_SETTINGS,
+  HEIGHT,
+  SMALL,
+  WIDTH,
+  assert_finite,
+  assert_grads_close,
+  batched_values_and_grads,
+  extreme_batch,
+  grad_all,
+  hard_scene,
+  loss_weights,
+  render_and_grads,
+)
 
 from mfsample import Camera, Gaussians, RenderSettings, render
 from mfsample._pytree import replace
+from mfsample.renderer.composite import composite
+from mfsample.renderer.projection import footprint_sigma, project_gaussians, view_directions
 from mfsample.renderer.reference import render_reference
+from mfsample.renderer.sh import sh_to_color
+from mfsample.renderer.tiles import intersect_tiles
 from mfsample.testing import orbit_camera, random_gaussians
-
-# Small chunks and steps so that one tile's list spans many chunks and several loop steps.
-SMALL = RenderSettings(max_intersections=4096, chunk_size=8, chunks_per_step=4)
-WIDTH, HEIGHT = 45, 31  # non-square, not a multiple of the tile size
-
-
-def hard_scene(sh_degree, seed=0, num_random=60):
-  """Random Gaussians plus the awkward cases, seen from `hard_camera()`."""
-  g = random_gaussians(num_random, sh_degree=sh_degree, seed=seed, scale_range=(0.02, 0.3))
-  cam = hard_camera()
-  center, rot = np.asarray(cam.center), np.asarray(cam.rotation)
-  fwd, right = rot[2], rot[0]
-
-  def at_depth(z, side=0.0):
-    return center + z * fwd + side * right
-
-  special = [  # (mean, scales, opacity)
-      (at_depth(-1.0), (0.3, 0.3, 0.3), 0.9),  # behind the camera
-      (at_depth(0.25), (0.4, 0.4, 0.4), 0.8),  # straddles the near plane (0.2)
-      (at_depth(3.0, side=40.0), (0.5, 0.5, 0.5), 0.9),  # far off screen
-      (at_depth(3.0, side=0.3), (1e-4, 1e-4, 0.6), 0.9),  # needle-thin
-      (at_depth(6.0), (4.0, 4.0, 4.0), 0.3),  # huge, behind everything
-      (at_depth(2.5, side=-0.2), (0.2, 0.2, 0.2), 0.003),  # below alpha_min: invisible
-      (at_depth(2.6, side=0.1), (0.2, 0.2, 0.2), 0.02),  # nearly transparent, visible
-  ]
-  rng = np.random.default_rng(seed + 1)
-  k = (sh_degree + 1) ** 2
-  extra = Gaussians(
-      means=jnp.asarray(np.stack([s[0] for s in special]), jnp.float32),
-      scales=jnp.asarray(np.array([s[1] for s in special]), jnp.float32),
-      quats=jnp.asarray(rng.normal(size=(len(special), 4)), jnp.float32),
-      opacities=jnp.asarray([s[2] for s in special], jnp.float32),
-      sh=jnp.asarray(rng.normal(0, 0.3, (len(special), k, 3)), jnp.float32),
-  )
-  return jax.tree.map(lambda a, b: jnp.concatenate([a, b]), g, extra), cam
-
-
-def hard_camera():
-  return orbit_camera(WIDTH, HEIGHT, azimuth=0.7, elevation=0.3, distance=2.6, fov_x=1.1)
-
-
-BACKGROUND = jnp.array([0.2, 0.5, 0.9])
-
-
-@functools.partial(jax.jit, static_argnames=("settings", "reference"))
-def _render_and_grads(gaussians, camera, weights, *, settings, reference=False):
-  """Outputs and gradients of a random linear functional of (rgb, alpha, depth)."""
-
-  def outputs(g, c):
-    if reference:
-      return render_reference(g, c, background=BACKGROUND, settings=settings)
-    out = render(g, c, background=BACKGROUND, settings=settings)
-    return out.rgb, out.alpha, out.depth
-
-  def loss(g, c):
-    rgb, alpha, depth = outputs(g, c)
-    return (jnp.sum(weights[..., :3] * rgb) + jnp.sum(weights[..., 3] * alpha)
-            + 0.1 * jnp.sum(weights[..., 4] * depth))
-
-  grads = jax.grad(loss, argnums=(0, 1))(gaussians, camera)
-  return outputs(gaussians, camera), grads
-
-
-def _loss_weights(seed=3):
-  return jnp.asarray(np.random.default_rng(seed).normal(size=(HEIGHT, WIDTH, 5)), jnp.float32)
-
-
-def _assert_grads_close(got, want, rtol=2e-3):
-  for path, g, w in zip(jax.tree_util.tree_leaves_with_path(got),
-                        jax.tree.leaves(got), jax.tree.leaves(want), strict=True):
-    scale = float(np.max(np.abs(w))) + 1e-12
-    np.testing.assert_allclose(np.asarray(g), np.asarray(w), rtol=rtol, atol=rtol * scale,
-                               err_msg=jax.tree_util.keystr(path[0]))
 
 
 @pytest.mark.parametrize("sh_degree, settings", [(3, SMALL), (0, RenderSettings())],
                          ids=["sh3-small-chunks", "sh0-default-settings"])
 def test_tiled_matches_dense_reference(sh_degree, settings):
   gaussians, cam = hard_scene(sh_degree)
-  weights = _loss_weights()
-  (rgb, alpha, depth), grads = _render_and_grads(gaussians, cam, weights, settings=settings)
-  (rgb_r, alpha_r, depth_r), grads_r = _render_and_grads(gaussians, cam, weights,
+  weights = loss_weights()
+  (rgb, alpha, depth), grads = render_and_grads(gaussians, cam, weights, settings=settings)
+  (rgb_r, alpha_r, depth_r), grads_r = render_and_grads(gaussians, cam, weights,
                                                          settings=settings, reference=True)
   assert rgb.shape == (HEIGHT, WIDTH, 3)
   np.testing.assert_allclose(rgb, rgb_r, atol=2e-5)
   np.testing.assert_allclose(alpha, alpha_r, atol=2e-5)
   np.testing.assert_allclose(depth, depth_r, atol=2e-4)
   assert float(alpha.max()) > 0.5, "the scene should cover part of the image"
-  _assert_grads_close(grads, grads_r)
+  assert_grads_close(grads, grads_r)
 
 
 def test_image_does_not_depend_on_tile_size():
   gaussians, cam = hard_scene(3, seed=5)
-  outs = [render(gaussians, cam, settings=SMALL.replace(tile_size=t)) for t in (4, 16)]
+  outs = [render(gaussians, cam, settings=SMALL.replace(tile_size=t)) for t in (8, 16)]
   np.testing.assert_allclose(outs[0].rgb, outs[1].rgb, atol=2e-5)
+
+
+# ------------------------------------------------------------------ the rasterisation rule
+
+
+def test_an_opaque_gaussian_contributes_to_its_alpha_cut_not_to_3_sigma():
+  """Opacity 1: alpha = exp(-d^2 / 2) out to d = sqrt(2 ln 255) = 3.33 (so at 3.1-3.3 sigma,
+  where the old 3-sigma rule cut it), and nothing beyond."""
+  cam = orbit_camera(32, 32, distance=4.0)
+  g = Gaussians(means=jnp.zeros((1, 3)), scales=jnp.full((1, 3), 0.3),
+                quats=jnp.array([[1.0, 0, 0, 0]]), opacities=jnp.ones(1),
+                sh=jnp.zeros((1, 1, 3)))
+  proj = project_gaussians(g.means, g.scales, g.quats, g.opacities, None, cam,
+                           RenderSettings())
+  (u, v), (a, b, c) = np.asarray(proj.means2d[0]), np.asarray(proj.conics[0])
+  dx, dy = np.meshgrid(np.arange(32) + 0.5 - u, np.arange(32) + 0.5 - v)
+  d = np.sqrt(a * dx * dx + 2 * b * dx * dy + c * dy * dy)  # Mahalanobis distance [H, W]
+  near_cut = (d > 3.1) & (d < 3.3)
+  beyond = (d > 3.34) & (d < 4.0)
+  assert near_cut.sum() >= 8 and beyond.sum() >= 8
+
+  alpha = np.asarray(render(g, cam, settings=SMALL).alpha)
+  np.testing.assert_allclose(alpha[near_cut], np.exp(-0.5 * d[near_cut] ** 2), rtol=1e-4)
+  np.testing.assert_array_equal(alpha[beyond], 0.0)
+
+
+@functools.partial(jax.jit, static_argnames=("settings",))
+def _render_with_3_sigma_footprints(g, cam, settings):
+  """The renderer before the alpha rule, from its stages: every Gaussian listed in the
+  tiles of its 3-sigma square, whatever its opacity. Returns (rgb, stats)."""
+  proj = project_gaussians(g.means, g.scales, g.quats, g.opacities, g.mask, cam, settings)
+  sigmas = footprint_sigma(g.opacities, settings)  # proj.radii = sigmas * sqrt(lambda_max)
+  ok = proj.valid & (sigmas > 0)
+  radii = jnp.where(ok, 3.0 * proj.radii / jnp.where(ok, sigmas, 1.0), 0.0)
+  layout = intersect_tiles(proj._replace(radii=radii), cam.width, cam.height, settings)
+  colors = sh_to_color(g.sh, view_directions(g.means, cam))
+  blend_in = jnp.concatenate([colors, proj.depths[:, None]], axis=-1)
+  opacities = jnp.where(proj.valid, g.opacities, 0.0)
+  blended, alpha = composite(layout, proj.means2d, proj.conics, opacities, blend_in,
+                             cam.width, cam.height, settings)
+  return blended[..., :3] + (1.0 - alpha)[..., None] * BACKGROUND, layout.stats
+
+
+def test_radius_sigma_3_reproduces_the_3_sigma_renderer():
+  """`radius_sigma=3.0` renders the images of the renderer before the alpha rule.
+
+  Only the tile lists differ (a Gaussian of opacity < exp(4.5) / 255 = 0.35 is listed in
+  the tiles of its smaller alpha footprint, where it contributes, not of its 3-sigma
+  square), so the images agree to float rounding: sums are grouped into other chunks.
+  """
+  g, cam = hard_scene(3)
+  settings = SMALL.replace(radius_sigma=3.0)
+  new = render(g, cam, background=BACKGROUND, settings=settings)
+  old_rgb, old_stats = _render_with_3_sigma_footprints(g, cam, settings)
+  np.testing.assert_allclose(new.rgb, old_rgb, atol=1e-6)
+  assert not bool(old_stats.overflow)
+  assert int(new.stats.num_intersections) < int(old_stats.num_intersections)
 
 
 def test_3dgs_rules_on_a_stack_of_opaque_gaussians():
@@ -135,9 +138,13 @@ def test_3dgs_rules_on_a_stack_of_opaque_gaussians():
 def test_gradients_match_float64_finite_differences():
   """Directional derivatives along random directions, one parameter group at a time.
 
-  `offset` is the 2D-centre offset whose gradient densification thresholds.
+  `offset` is the 2D-centre offset whose gradient densification thresholds. The alpha and
+  radius cut-offs are discontinuities (a contribution of alpha_min appears or vanishes), so
+  a finite difference that moves a pixel across one measures the jump, not the derivative:
+  they are off here (alpha_min = 0; a 6-sigma cap, where alpha is below 1e-8).
   """
   fields = ("means", "scales", "quats", "opacities", "sh")
+  smooth = SMALL.replace(alpha_min=0.0, radius_sigma=6.0)
   with jax.enable_x64(True):
     g = random_gaussians(40, sh_degree=2, seed=11, scale_range=(0.05, 0.3),
                          opacity_range=(0.2, 0.8), dtype=jnp.float64)
@@ -153,7 +160,7 @@ def test_gradients_match_float64_finite_differences():
                         [-omega[1], omega[0], 0]])
       delta = jnp.eye(4).at[:3, :3].set(jax.scipy.linalg.expm(skew)).at[:3, 3].set(t)
       camera = replace(cam, world_to_camera=delta @ cam.world_to_camera)
-      out = render(gaussians, camera, background=jnp.array([0.3, 0.3, 0.3]), settings=SMALL,
+      out = render(gaussians, camera, background=jnp.array([0.3, 0.3, 0.3]), settings=smooth,
                    screen_offset=params["offset"])
       return (jnp.sum(weights[..., :3] * out.rgb) + jnp.sum(weights[..., 3] * out.alpha)
               + 0.1 * jnp.sum(weights[..., 4] * out.depth))
@@ -194,58 +201,13 @@ def test_gradient_flows_through_look_at_to_eye():
 # ------------------------------------------------------------------ extremes
 
 
-def _extreme_batch():
-  """Same-shape scenes, each with one extreme property, stacked for one vmapped compile."""
-  n = 8
-  base = random_gaussians(n, sh_degree=1, seed=4, scale_range=(0.05, 0.2))
-  cam = orbit_camera(16, 12, distance=3.0)
-  center = jnp.asarray(cam.center, jnp.float32)
-  on_camera_plane = center + 1.0 * cam.rotation[0]  # z = 0 in camera space
-  cases = {
-      "scale 1e-8": replace(base, scales=jnp.full((n, 3), 1e-8)),
-      "scale 1e-4": replace(base, scales=jnp.full((n, 3), 1e-4)),
-      "scale 1e4": replace(base, scales=jnp.full((n, 3), 1e4)),
-      "mixed scales": replace(base, scales=base.scales.at[:, 0].set(1e-8).at[:, 1].set(1e4)),
-      "opacity 0": replace(base, opacities=jnp.zeros(n)),
-      "opacity 1": replace(base, opacities=jnp.ones(n)),
-      "mean at camera": replace(base, means=base.means.at[0].set(center)),
-      "mean on z=0": replace(base, means=base.means.at[0].set(on_camera_plane)),
-      "zero quaternion": replace(base, quats=jnp.zeros((n, 4))),
-      "all masked": replace(base, mask=jnp.zeros(n, bool)),
-      "camera inside": replace(base, means=center + 0.5 * base.means),
-  }
-  cases = {k: replace(v, mask=v.mask if v.mask is not None else jnp.ones(n, bool))
-           for k, v in cases.items()}
-  batch = jax.tree.map(lambda *xs: jnp.stack(xs), *cases.values())
-  return list(cases), batch, cam
-
-
-def _grad_all(g, cam, settings):
-  def loss(g, cam):
-    out = render(g, cam, background=jnp.array([0.1, 0.2, 0.3]), settings=settings)
-    return jnp.sum(out.rgb) + jnp.sum(out.alpha) + jnp.sum(out.depth)
-
-  # allow_int: the boolean mask is a leaf too (its cotangent is float0).
-  return jax.value_and_grad(loss, argnums=(0, 1), allow_int=True)(g, cam)
-
-
-def _assert_finite(tree, label):
-  for path, leaf in jax.tree_util.tree_leaves_with_path(tree):
-    if leaf.dtype == jax.dtypes.float0:
-      continue
-    where = jax.tree_util.keystr(path)
-    assert np.all(np.isfinite(np.asarray(leaf))), f"{label}: non-finite {where}"
-
-
 def test_finite_outputs_and_gradients_at_extremes():
-  names, batch, cam = _extreme_batch()
-  settings = RenderSettings(max_intersections=1024, chunk_size=8, chunks_per_step=4)
-  values, grads = jax.jit(jax.vmap(functools.partial(_grad_all, settings=settings),
-                                   in_axes=(0, None)))(batch, cam)
+  names, batch, cam = extreme_batch()
+  values, grads = batched_values_and_grads(batch, cam, settings=EXTREME_SETTINGS)
   for i, name in enumerate(names):
-    _assert_finite(values[i], name)
-    _assert_finite(jax.tree.map(lambda x, i=i: x[i], grads[0]), name)
-  _assert_finite(grads[1], "camera")  # summed over the batch by vmap's None axis
+    assert_finite(values[i], name)
+    assert_finite(jax.tree.map(lambda x, i=i: x[i], grads[0]), name)
+  assert_finite(grads[1], "camera")  # summed over the batch by vmap's None axis
 
 
 @pytest.mark.parametrize("num, width, height", [(0, 8, 8), (1, 8, 8), (5, 1, 1)])
@@ -254,8 +216,8 @@ def test_finite_for_tiny_inputs(num, width, height):
   g = jax.tree.map(lambda x: x[:num], g)
   cam = orbit_camera(width, height, distance=3.0)
   settings = RenderSettings(max_intersections=64, chunk_size=8, chunks_per_step=2)
-  (value, grads) = _grad_all(g, cam, settings)
-  _assert_finite((value, grads), f"N={num} {width}x{height}")
+  (value, grads) = grad_all(g, cam, settings)
+  assert_finite((value, grads), f"N={num} {width}x{height}")
   out = render(g, cam, settings=settings)
   assert out.rgb.shape == (height, width, 3)
   if num == 0:
@@ -368,6 +330,44 @@ def test_screen_offset_moves_the_2d_centres_and_reports_footprints():
   grad = jax.grad(loss)(jnp.zeros((g.num_gaussians, 2)))
   assert np.all(np.isfinite(grad)) and np.any(np.asarray(grad) != 0)
   np.testing.assert_array_equal(np.asarray(grad)[~np.asarray(base.visible)], 0.0)
+
+
+@functools.partial(jax.jit, static_argnames=("settings",))
+def _images_and_grads(batch, cam, settings):
+  """(rgb, visible) of each scene of a same-shape batch, and the gradient of its sum."""
+  def one(g):
+    out = render(g, cam, background=BACKGROUND, settings=settings)
+    return jnp.sum(out.rgb) + jnp.sum(out.depth), (out.rgb, out.visible)
+
+  grad_fn = jax.value_and_grad(one, has_aux=True, allow_int=True)
+  (_, images), grads = jax.vmap(grad_fn)(batch)
+  return images, grads
+
+
+@pytest.mark.parametrize("compositor", ["jnp", pytest.param("pallas", marks=pytest.mark.slow)])
+def test_non_finite_gaussians_are_culled_and_poison_nothing(compositor):
+  """A NaN in a masked-out Gaussian at slot 0 (the slot padding entries point at) and a NaN
+  colour in one visible Gaussian: every pixel stays finite and equals the render without
+  those Gaussians, and their gradients are 0, not NaN."""
+  n, k = 16, 5
+  g = random_gaussians(n, sh_degree=1, seed=8, scale_range=(0.1, 0.4))
+  g = replace(g, mask=jnp.ones(n, bool).at[0].set(False))
+  cam = orbit_camera(16, 16, distance=3.0)
+  poisoned = replace(g, means=g.means.at[0].set(jnp.nan), sh=g.sh.at[0].set(jnp.nan)
+                     .at[k, 0, 1].set(jnp.nan))
+  without = replace(g, mask=g.mask.at[k].set(False))
+  batch = jax.tree.map(lambda *x: jnp.stack(x), g, poisoned, without)
+  (rgb, visible), grads = _images_and_grads(batch, cam, SMALL.replace(compositor=compositor))
+  rgb, visible = np.asarray(rgb), np.asarray(visible)
+  assert visible[0, k] and not visible[1, k] and not visible[1, 0]
+  assert np.all(np.isfinite(rgb[1]))
+  np.testing.assert_array_equal(rgb[1], rgb[2])
+  assert np.any(rgb[0] != rgb[1])  # Gaussian k did show when it was finite
+  for leaf in jax.tree.leaves(replace(grads, mask=None)):
+    leaf = np.asarray(leaf)[1]
+    assert np.all(np.isfinite(leaf))
+    np.testing.assert_array_equal(leaf[[0, k]], 0.0)
+    assert np.any(leaf != 0.0)
 
 
 def test_masked_gaussians_change_nothing_and_get_no_gradient():

@@ -76,6 +76,15 @@ def test_overflow_is_flagged_with_an_upper_bound_of_the_need():
     assert int(cut.stats.num_padded) >= int(full.stats.num_padded)
 
 
+def test_searchsorted_methods_give_the_same_layout():
+  """`searchsorted_method` is a speed knob (GPUs may prefer "sort" or "compare_all")."""
+  settings = RenderSettings(max_intersections=1024, chunk_size=8, chunks_per_step=4)
+  _, want = _layout(settings, num=40)
+  _, got = _layout(settings.replace(searchsorted_method="sort"), num=40)
+  for a, b in zip(jax.tree.leaves(got), jax.tree.leaves(want), strict=True):
+    np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+
+
 def test_no_valid_gaussians_gives_an_empty_layout():
   settings = RenderSettings(max_intersections=256, chunk_size=8, chunks_per_step=4)
   g = random_gaussians(10, seed=0)

@@ -7,8 +7,8 @@ to float32 / `Camera` at the end.
 import json
 from pathlib import Path
 
-import imageio.v3 as iio
 import numpy as np
+from PIL import Image
 
 # A rotation is accepted when |R^T R - I| and |det R - 1| stay below this. Dataset poses are
 # stored as float32 (lego: errors ~1e-7); anything near 1e-3 is a scaled or sheared matrix.
@@ -49,24 +49,36 @@ def read_json(path):
 
 
 def read_image(path):
-  """Reads an image as float32 in [0, 1].
+  """Reads an image as float32 in [0, 1], at the full precision of the file.
 
   Args:
-    path: a PNG / JPEG file (8- or 16-bit; grey, grey + alpha, RGB or RGBA).
+    path: a PNG (1, 2, 4, 8 or 16 bits per channel; grey, grey + alpha, RGB, RGBA or a
+      palette) or a JPEG (grey, RGB or CMYK) file.
 
   Returns:
     ([H, W, 3] colour, [H, W] alpha or None when the file has no alpha channel). The colour is
     the stored (straight, not premultiplied) colour.
+
+  Raises:
+    DatasetError: the file is not a readable image of those kinds (naming the file).
   """
   path = require_file(path, "image")
   try:
-    data = iio.imread(path)
-  except Exception as e:  # imageio raises plugin-specific types for corrupt files
-    raise DatasetError(f"{path}: cannot read image ({e}).") from e
+    if _png_header(path)[0] == 16:  # Pillow would round 16-bit colour to 8 bits
+      data = _read_png16(path)
+    else:
+      with Image.open(path) as image:
+        data = _pillow_array(image, path)
+  except DatasetError:
+    raise
+  except Exception as e:  # Pillow and pypng raise their own types for corrupt files
+    raise DatasetError(f"{path}: cannot read image ({type(e).__name__}: {e}).") from e
   if data.dtype == np.uint8:
     img = data.astype(np.float32) / 255.0
   elif data.dtype == np.uint16:
     img = data.astype(np.float32) / 65535.0
+  elif data.dtype == np.bool_:
+    img = data.astype(np.float32)
   elif np.issubdtype(data.dtype, np.floating):
     img = data.astype(np.float32)
   else:
@@ -80,6 +92,50 @@ def read_image(path):
   alpha = img[..., -1] if channels in (2, 4) else None
   color = img[..., :3] if channels >= 3 else np.repeat(img[..., :1], 3, axis=-1)
   return np.ascontiguousarray(color), alpha
+
+
+_PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+
+def _png_header(path):
+  """(bit depth, colour type) of a PNG file's IHDR, or (None, None) for other files."""
+  with open(path, "rb") as f:
+    head = f.read(26)
+  if len(head) < 26 or head[:8] != _PNG_SIGNATURE or head[12:16] != b"IHDR":
+    return None, None
+  return head[24], head[25]
+
+
+def _read_png16(path):
+  """[H, W, C] uint16 of a 16-bit PNG (pypng: exact; tRNS becomes an alpha channel)."""
+  try:
+    import png
+  except ImportError as err:
+    raise ImportError(f"{path} is a 16-bit PNG; reading it at full precision needs pypng "
+                      "(pip install pypng).") from err
+  width, height, rows, info = png.Reader(filename=str(path)).asDirect()
+  planes = int(info["planes"])
+  data = np.vstack([np.asarray(row, np.uint16) for row in rows])
+  return data.reshape(height, width, planes)
+
+
+def _pillow_array(image, path):
+  """The pixels of a Pillow image as a numpy array in one of read_image's layouts."""
+  mode = image.mode
+  if mode == "P":  # palette: its colours (and transparency, if any)
+    image = image.convert("RGBA" if "transparency" in image.info else "RGB")
+  elif mode in ("CMYK", "YCbCr", "LAB", "HSV"):
+    image = image.convert("RGB")
+  elif mode == "1":
+    image = image.convert("L")
+  elif mode in ("I", "I;16", "I;16B", "I;16L"):  # 16-bit grey (or 32-bit int) files
+    data = np.asarray(image)
+    if data.min(initial=0) < 0 or data.max(initial=0) > 65535:
+      raise DatasetError(f"{path}: integer pixels outside [0, 65535] (mode {mode}).")
+    return data.astype(np.uint16)
+  elif mode not in ("L", "LA", "RGB", "RGBA", "F"):
+    raise DatasetError(f"{path}: unsupported image mode {mode!r}.")
+  return np.asarray(image)
 
 
 def area_downscale(x, factor, path=None):
@@ -105,33 +161,57 @@ def check_downscale(downscale):
   return int(downscale)
 
 
-def validate_rigid(matrix, where):
+def validate_rigid(matrix, where, field="pose"):
   """Checks a [3, 4] or [4, 4] pose: finite, orthonormal rotation with det +1.
 
   Args:
     matrix: array-like pose.
     where: text naming the file and frame, used in the error message.
+    field: what the matrix is called there ("'transform_matrix'").
 
   Returns:
     [4, 4] float64 matrix.
   """
-  m = np.asarray(matrix, dtype=np.float64)
+  try:
+    m = np.asarray(matrix, dtype=np.float64)
+  except (TypeError, ValueError):
+    raise DatasetError(f"{where}: {field} must be a 3x4 or 4x4 matrix of numbers, got "
+                       f"{_short(matrix)}.") from None
   if m.shape not in ((3, 4), (4, 4)):
-    raise DatasetError(f"{where}: pose must be a 3x4 or 4x4 matrix, got shape {m.shape}.")
+    raise DatasetError(f"{where}: {field} must be a 3x4 or 4x4 matrix, got shape {m.shape}.")
   if not np.all(np.isfinite(m)):
-    raise DatasetError(f"{where}: pose has non-finite entries.")
+    raise DatasetError(f"{where}: {field} has non-finite entries.")
   if m.shape == (3, 4):
     m = np.concatenate([m, [[0.0, 0.0, 0.0, 1.0]]], axis=0)
   elif np.max(np.abs(m[3] - [0.0, 0.0, 0.0, 1.0])) > ROTATION_TOLERANCE:
-    raise DatasetError(f"{where}: pose bottom row must be [0, 0, 0, 1], got {m[3].tolist()}.")
+    raise DatasetError(f"{where}: {field} bottom row must be [0, 0, 0, 1], got "
+                       f"{m[3].tolist()}.")
   rot = m[:3, :3]
   ortho_err = np.max(np.abs(rot.T @ rot - np.eye(3)))
   det = np.linalg.det(rot)
   if ortho_err > ROTATION_TOLERANCE or abs(det - 1.0) > ROTATION_TOLERANCE:
-    raise DatasetError(f"{where}: pose is not rigid (|R^T R - I| = {ortho_err:.2e}, "
-                       f"det R = {det:.4f}); expected a rotation and a translation.")
+    mirror = "; a reflection" if det < 0 else ""
+    raise DatasetError(f"{where}: {field} is not rigid (|R^T R - I| = {ortho_err:.2e}, "
+                       f"det R = {det:.4f}{mirror}); expected a rotation and a translation.")
   m[3] = [0.0, 0.0, 0.0, 1.0]
   return m
+
+
+def number(mapping, key, where, *, integer=False):
+  """`mapping[key]` as a float (an int when `integer`); DatasetError naming `where` and the
+  key when it is not a finite number (a string, a bool, a list, NaN)."""
+  value = mapping[key]
+  ok = isinstance(value, (int, float)) and not isinstance(value, bool)
+  ok = ok and np.isfinite(value) and (not integer or float(value).is_integer())
+  if not ok:
+    kind = "an integer" if integer else "a finite number"
+    raise DatasetError(f"{where}: '{key}' must be {kind}, got {_short(value)}.")
+  return int(value) if integer else float(value)
+
+
+def _short(value, limit=60):
+  text = repr(value)
+  return text if len(text) <= limit else text[:limit] + "..."
 
 
 def invert_rigid(c2w):

@@ -94,8 +94,9 @@ def load_blender(path, split, *, downscale=1, background=(1.0, 1.0, 1.0)) -> Vie
     images.append(color)
     alphas.append(alpha)
     names.append(_frame_name(frame, root, image_path))
-    c2ws.append(_io.validate_rigid(_get(frame, "transform_matrix", where), where))
-    intrinsics.append(_intrinsics(meta, frame, size, where))
+    c2ws.append(_io.validate_rigid(_get(frame, "transform_matrix", where), where,
+                                   "'transform_matrix'"))
+    intrinsics.append(_intrinsics(meta, frame, size, where, json_path))
 
   has_alpha = any(a is not None for a in alphas)
   alpha_arr = None
@@ -176,32 +177,39 @@ def _frame_name(frame, root, image_path):
   return image_path.relative_to(root).with_suffix("").as_posix()
 
 
-def _intrinsics(meta, frame, size, where):
+def _intrinsics(meta, frame, size, where, json_path):
   """(fx, fy, cx, cy) in pixels of the full-size image."""
   height, width = size
-  keys = {k: frame.get(k, meta.get(k)) for k in _INTRINSIC_KEYS}
+  # A per-frame key overrides the top-level one; errors name where the value came from.
+  source = {k: (frame, where) if k in frame else (meta, str(json_path))
+            for k in _INTRINSIC_KEYS + ("camera_angle_x",)}
+
+  def value(key, **kw):
+    mapping, at = source[key]
+    return None if mapping.get(key) is None else _io.number(mapping, key, at, **kw)
+
   for key in ("w", "h"):
     expected = width if key == "w" else height
-    if keys[key] is not None and int(keys[key]) != expected:
-      raise _io.DatasetError(f"{where}: '{key}' = {keys[key]} but the image is "
-                             f"{width}x{height}.")
-  if keys["fl_x"] is not None:
-    fx = float(keys["fl_x"])
-    fy = float(keys["fl_y"]) if keys["fl_y"] is not None else fx
+    got = value(key, integer=True)
+    if got is not None and got != expected:
+      raise _io.DatasetError(f"{where}: '{key}' = {got} but the image is {width}x{height}.")
+  fx, fy = value("fl_x"), value("fl_y")
+  if fx is not None:
+    fy = fx if fy is None else fy
   else:
-    angle = frame.get("camera_angle_x", meta.get("camera_angle_x"))
+    angle = value("camera_angle_x")
     if angle is None:
       raise _io.DatasetError(f"{where}: missing key 'camera_angle_x' (or 'fl_x').")
-    angle = float(angle)
     if not 0.0 < angle < np.pi:
-      raise _io.DatasetError(f"{where}: camera_angle_x = {angle} is not in (0, pi).")
+      raise _io.DatasetError(f"{source['camera_angle_x'][1]}: 'camera_angle_x' = {angle} is "
+                             "not in (0, pi) radians.")
     fx = fy = 0.5 * width / np.tan(0.5 * angle)
-  cx = float(keys["cx"]) if keys["cx"] is not None else 0.5 * width
-  cy = float(keys["cy"]) if keys["cy"] is not None else 0.5 * height
-  values = np.array([fx, fy, cx, cy])
-  if not np.all(np.isfinite(values)) or fx <= 0 or fy <= 0:
-    raise _io.DatasetError(f"{where}: invalid intrinsics fx={fx}, fy={fy}, cx={cx}, cy={cy}.")
-  return values
+  cx, cy = value("cx"), value("cy")
+  cx = 0.5 * width if cx is None else cx
+  cy = 0.5 * height if cy is None else cy
+  if fx <= 0 or fy <= 0:
+    raise _io.DatasetError(f"{where}: focal lengths must be > 0, got fl_x={fx}, fl_y={fy}.")
+  return np.array([fx, fy, cx, cy])
 
 
 def _downscale_rgba(color, alpha, factor, path):
@@ -217,7 +225,10 @@ def _read_depth(root, frame, image_path, size, where):
   """(metric depth or None, Blender depth code in [0, 1] or None), both [H, W] float32."""
   depth = code = None
   if "depth_file_path" in frame:
-    depth_path = _io.require_file(root / str(frame["depth_file_path"]), f"depth of {where}")
+    if not isinstance(frame["depth_file_path"], str) or not frame["depth_file_path"]:
+      raise _io.DatasetError(f"{where}: 'depth_file_path' must be a non-empty string, got "
+                             f"{frame['depth_file_path']!r}.")
+    depth_path = _io.require_file(root / frame["depth_file_path"], f"depth of {where}")
     try:
       depth = np.load(depth_path, allow_pickle=False)
     except (ValueError, OSError) as e:

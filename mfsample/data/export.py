@@ -7,6 +7,7 @@ from pathlib import Path
 import imageio.v3 as iio
 import numpy as np
 
+from mfsample._json import atomic_path, write_text
 from mfsample.data import _io
 from mfsample.data.blender import GL_TO_CV
 from mfsample.data.views import Views
@@ -68,7 +69,8 @@ def export_blender(path, views: Views, *, split="train", background=(1.0, 1.0, 1
         "fl_x": float(fx[i]), "fl_y": float(fy[i]), "cx": float(cx[i]), "cy": float(cy[i]),
     }
     if views.depths is not None:
-      np.save(root / split / f"{stem}_depth.npy", np.asarray(views.depths[i], np.float32))
+      with atomic_path(root / split / f"{stem}_depth.npy") as tmp:
+        np.save(tmp, np.asarray(views.depths[i], np.float32))
       frame["depth_file_path"] = f"./{split}/{stem}_depth.npy"
     frames.append(frame)
   meta = {
@@ -78,15 +80,15 @@ def export_blender(path, views: Views, *, split="train", background=(1.0, 1.0, 1
       "depth_unit": "metres of camera z-depth (0 = nothing hit)",
       "frames": frames,
   }
-  tmp = json_path.with_name(json_path.name + ".tmp")
-  tmp.write_text(json.dumps(meta, indent=2))
-  tmp.replace(json_path)  # the json last and atomically: it is what marks a split complete
+  # The json last (every file is written atomically): it is what marks a split complete.
+  write_text(json_path, json.dumps(meta, indent=2))
   return json_path
 
 
 def _write_png(path, image, alpha, background):
   if alpha is None:
-    iio.imwrite(path, _to_u8(image))
+    with atomic_path(path) as tmp:
+      iio.imwrite(tmp, _to_u8(image))
     return
   alpha_q = _to_u8(alpha)
   a = alpha_q.astype(np.float32) / 255.0
@@ -94,7 +96,8 @@ def _write_png(path, image, alpha, background):
   # so that re-compositing the stored values lands closest to C.
   premult = image - (1.0 - a[..., None]) * background
   straight = np.where(a[..., None] > 0, premult / np.maximum(a[..., None], 1e-12), 0.0)
-  iio.imwrite(path, np.concatenate([_to_u8(straight), alpha_q[..., None]], axis=-1))
+  with atomic_path(path) as tmp:
+    iio.imwrite(tmp, np.concatenate([_to_u8(straight), alpha_q[..., None]], axis=-1))
 
 
 def _to_u8(x):

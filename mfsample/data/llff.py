@@ -52,6 +52,9 @@ def load_llff(path, *, factor=8):
     data = np.load(poses_path, allow_pickle=False)
   except (ValueError, OSError) as e:
     raise _io.DatasetError(f"{poses_path}: cannot read ({e}).") from e
+  if not (np.issubdtype(data.dtype, np.floating) or np.issubdtype(data.dtype, np.integer)):
+    raise _io.DatasetError(f"{poses_path}: expected a real number array, got dtype "
+                           f"{data.dtype}.")
   if data.ndim != 2 or data.shape[1] != 17 or data.shape[0] < 1:
     raise _io.DatasetError(f"{poses_path}: expected an array of shape [V, 17], got "
                            f"{data.shape}.")

@@ -12,8 +12,12 @@ tiny synthetic scene) on the command line; every number is a field below.
 
 import ml_collections
 
-from mfsample.planning.strategies import TABLE1_NAMES
+from mfsample import config_checks
+from mfsample.model import GROUPS
+from mfsample.planning.strategies import NAMES, TABLE1_NAMES
+from mfsample.train.config import LPIPS_NETS
 from mfsample.train.config import default_config as training_config
+from mfsample.train.config import validate as validate_training
 
 
 def _training(steps, kind):
@@ -174,4 +178,114 @@ def default_config():
   fig.landscape_u = 36  # Azimuth samples of the landscape grid.
   fig.landscape_v = 10  # Polar samples of the landscape grid.
   fig.landscape_trajectory = True  # Trace an optimisation from a random start on it.
+  return config
+
+
+DATA_KINDS = ("scene", "blender", "synthetic")
+
+
+def validate(config):
+  """Checks every field of a planning config; `ConfigError` naming the field and its range.
+
+  `run_camera_planning` calls it before anything is written. Seeds and strategies must be
+  distinct (a repeated seed would count one run twice in the means and standard errors), the
+  evaluation counts must lie within `max_views`, and the round and final training configs
+  are checked by `mfsample.train.config.validate` as `config.round_train` /
+  `config.final_train`.
+
+  Returns:
+    `config`.
+  """
+  c = config_checks
+  c.check_sequence(config, "seeds", item_minimum=0, distinct=True)
+  for i, seed in enumerate(config.seeds):
+    if seed > 2**31 - 1:
+      raise c.ConfigError(f"config.seeds[{i}] = {seed!r}: must be an integer in [0, "
+                          f"{2**31 - 1}]")
+  c.check_sequence(config, "strategies", item_choices=NAMES, distinct=True)
+  c.check_int(config, "initial_view")
+  max_views = c.check_int(config, "max_views", minimum=1)
+  eval_views = c.check_sequence(config, "eval_views", item_minimum=1, distinct=True)
+  if max(eval_views) > max_views:
+    raise c.ConfigError(f"config.eval_views = {tuple(eval_views)!r}: every count must be <= "
+                        f"config.max_views = {max_views}")
+  c.check_bool(config, "progress")
+  c.check_sequence(config, "paired_references", item_choices=NAMES, min_length=0,
+                   distinct=True)
+
+  kind = c.check_choice(config, "data.kind", DATA_KINDS)
+  c.check_floats(config, "data.background", 3, minimum=0.0, maximum=1.0)
+  c.check_bool(config, "data.progress")
+  c.check_int(config, "data.pool_seed", minimum=0, maximum=2**31 - 2)  # test poses: seed + 1
+  c.check_str(config, "data.scene", non_empty=True)
+  for field in ("width", "height", "num_test", "spp", "downscale", "test_every"):
+    c.check_int(config, f"data.{field}", minimum=1)
+  num_candidates = c.check_int(config, "data.num_candidates", minimum=1)
+  if kind != "blender":  # a blender pool's size is known once loaded (the runner checks)
+    if max_views > num_candidates:
+      raise c.ConfigError(f"config.max_views = {max_views} must be <= config.data."
+                          f"num_candidates = {num_candidates} (selection strategies pick "
+                          "distinct candidates)")
+    if config.initial_view >= num_candidates:
+      raise c.ConfigError(f"config.initial_view = {config.initial_view} must be < config."
+                          f"data.num_candidates = {num_candidates} (or < 0: a random one)")
+  c.check_str(config, "data.cache_dir")
+  c.check_str(config, "data.path")
+  c.check_floats(config, "data.bounds", 2, increasing=True)
+  c.check_choice(config, "data.synthetic.shape", ("shell", "cloud"))
+  c.check_int(config, "data.synthetic.num_gaussians", minimum=1)
+  c.check_int(config, "data.synthetic.seed", minimum=0)
+  radius = c.check_float(config, "data.synthetic.radius", above=0.0)
+  c.check_float(config, "data.synthetic.distance", above=radius)
+  c.check_floats(config, "data.synthetic.v_range", 2, minimum=0.0, maximum=1.0,
+                 increasing=True)
+  c.check_float(config, "data.synthetic.fov_x_deg", above=0.0, below=180.0)
+
+  c.check_bool(config, "rounds.warm_start")
+  c.check_int(config, "rounds.first_steps", minimum=1)
+  c.check_int(config, "rounds.steps", minimum=1)
+  c.check_int(config, "rounds.downscale", minimum=1)
+  validate_training(config.round_train, prefix="config.round_train")
+  validate_training(config.final_train, prefix="config.final_train")
+  if config.rounds.warm_start:
+    # Warm start continues one padded state, which cannot change shape (runner.round_config).
+    total = int(config.rounds.first_steps) + (max_views - 2) * int(config.rounds.steps)
+    if config.round_train.densify.start < total:
+      raise c.ConfigError(
+          f"config.rounds.warm_start = True continues one fixed-shape model over {total} "
+          f"steps, which cannot densify: config.round_train.densify.start = "
+          f"{config.round_train.densify.start} must be >= {total}")
+
+  s = "strategy"
+  c.check_int(config, f"{s}.score_downscale", minimum=1)
+  c.check_int(config, f"{s}.ours.select_samples", minimum=2)  # U of one sample is 0
+  c.check_int(config, f"{s}.ours.z_seed", minimum=0, maximum=2**32 - 1)
+  c.check_int(config, f"{s}.ours.chunk_size", minimum=1)
+  c.check_int(config, f"{s}.optimize.samples", minimum=2)
+  c.check_int(config, f"{s}.optimize.steps", minimum=0)
+  c.check_float(config, f"{s}.optimize.lr", above=0.0)
+  c.check_int(config, f"{s}.optimize.z_drop_step", minimum=0)
+  c.check_float(config, f"{s}.optimize.z_drop_scale", above=0.0, maximum=1.0)
+  c.check_int(config, f"{s}.optimize.downscale", minimum=1)
+  c.check_bool(config, f"{s}.optimize.resample_z")
+  c.check_choice(config, f"{s}.optimize.sampler", ("", "lowrank", "diagonal", "block"))
+  c.check_int(config, f"{s}.optimize.best_every", minimum=1)
+  c.check_int(config, f"{s}.fisher.probes", minimum=1)
+  c.check_int(config, f"{s}.fisher.train_probes", minimum=1)
+  c.check_float(config, f"{s}.fisher.reg", above=0.0)
+  c.check_sequence(config, f"{s}.fisher.groups", item_choices=GROUPS, distinct=True)
+  c.check_int(config, f"{s}.activenerf.steps", minimum=0)
+  for field in ("lr", "prior_var", "beta_min"):
+    c.check_float(config, f"{s}.activenerf.{field}", above=0.0)
+  c.check_float(config, f"{s}.activenerf.prior_weight", minimum=0.0)
+  c.check_int(config, f"{s}.acp.resolution", minimum=1)
+  c.check_int(config, f"{s}.acp.bins", minimum=1)
+  c.check_float(config, f"{s}.acp.weight", minimum=0.0)
+  c.check_float(config, f"{s}.acp.near", minimum=0.0)
+
+  c.check_choice(config, "eval.lpips_net", LPIPS_NETS)
+  c.check_bool(config, "figures.enabled")
+  c.check_int(config, "figures.landscape_u", minimum=1)
+  c.check_int(config, "figures.landscape_v", minimum=1)
+  c.check_bool(config, "figures.landscape_trajectory")
   return config

@@ -14,6 +14,8 @@ import math
 
 import numpy as np
 
+from mfsample._json import atomic_path
+
 _ORDER_CMAP = "viridis"
 
 
@@ -76,7 +78,8 @@ def camera_figure(records, pool, path, seed=0):
   fig.suptitle(f"{pool.name}: chosen cameras seen from above, seed {seed}\n"
                "star: initial view; numbers: order; hollow: optimised pose", fontsize=9)
   fig.tight_layout()
-  fig.savefig(path, dpi=130)
+  with atomic_path(path) as tmp:
+    fig.savefig(tmp, dpi=130)
   plt.close(fig)
   return path
 
@@ -112,6 +115,7 @@ def landscape_figure(land, path, title="U of the 1-view model (Eq. 10)"):
   ax.set_title(title, fontsize=10)
   ax.legend(loc="lower right", fontsize=7, framealpha=0.7)
   fig.tight_layout()
-  fig.savefig(path, dpi=130)
+  with atomic_path(path) as tmp:
+    fig.savefig(tmp, dpi=130)
   plt.close(fig)
   return path

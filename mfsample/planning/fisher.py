@@ -21,6 +21,15 @@ with H(train) accumulated over the training views, and the candidate with the hi
 is selected. As in FisherRF's default (`--filter_out_grad rotation`), the rotation
 parameters are left out (config `groups`). All candidates share the same probes (common
 random numbers: each score is still unbiased, and their differences are less noisy).
+
+The score is a sum over pixels: with D = diag(1 / (H(train) + lambda)),
+
+  score(c) = sum_p u(p),   u(p) = sum_c' sum_d D_d (dI_pc' / dtheta_d)^2 = (J D J^T)_pp,
+
+u(p) being the diagonal Laplace approximation's predictive variance of pixel p's colour: the
+per-pixel uncertainty map of FisherRF (`fisher_pixel_variance`). It is estimated with
+probes on the parameter side: for w in {-1, +1}^d, E_w[(J D^(1/2) w)_p^2] = u(p), so K probes
+cost K forward-mode Jacobian-vector products per camera and give the whole map at once.
 """
 
 import functools
@@ -203,3 +212,67 @@ def fisher_scores(model, train_cameras, candidates, key, *, settings: RenderSett
       num_devices=int(num_devices), max_budget=max_budget,
       stats_of=lambda out: out,  # FisherScores carries overflow and num_padded itself
       what="FisherRF scoring")
+
+
+def fisher_pixel_variance_from_probes(model, camera, h_train, probes, reg, *,
+                                      settings: RenderSettings, background,
+                                      groups=DEFAULT_GROUPS):
+  """mean_k sum_channels (J (D^(1/2) w_k))^2 per pixel over given probes w_k.
+
+  With Rademacher probes this is an unbiased estimate of u = diag(J D J^T) summed over the
+  channels; with probes whose second moment (1/K) sum_k w_k w_k^T is the identity (rows of
+  a Hadamard matrix) it is u exactly.
+
+  Args:
+    probes: {group: [K, C, ...]} probe entries, one leading [K] axis on every group of the
+      differentiated parameters.
+    (the others as in `fisher_pixel_variance`)
+
+  Returns:
+    ([H, W], `TileStats` of the render).
+  """
+  diff, image = _image_fn(model, camera, background, settings, groups)
+  scale = {g: jax.lax.rsqrt(h_train[g] + reg) for g in diff}
+
+  def one(w):
+    tangent = {g: scale[g] * w[g] for g in diff}
+    _, d_rgb, stats = jax.jvp(image, (diff,), (tangent,), has_aux=True)
+    return jnp.sum(jnp.square(d_rgb), axis=-1), stats
+
+  # Sequential: memory of one JVP. Every probe renders the same image: one's stats suffice.
+  maps, stats = jax.lax.map(one, probes)
+  return jnp.mean(maps, axis=0), jax.tree.map(lambda x: x[0], stats)
+
+
+@functools.partial(jax.jit, static_argnames=("settings", "num_probes", "groups"))
+def fisher_pixel_variance(model, camera, h_train, key, reg, *, settings: RenderSettings,
+                          background, num_probes, groups=DEFAULT_GROUPS):
+  """FisherRF's per-pixel uncertainty of one camera: u(p) = sum_d D_d (dI_p / dtheta_d)^2.
+
+  The per-pixel terms of the candidate score (module docstring), D = 1 / (H(train) + reg):
+  summed over pixels, u is the camera's score, in expectation. An unbiased estimate with
+  `num_probes` Rademacher probes over the parameters, one Jacobian-vector product each; per
+  pixel its relative standard deviation is at most sqrt(2 / num_probes).
+
+  Args:
+    model: deterministic `mfsample.model.Model` (its mean parameters are used).
+    camera: unbatched `Camera`.
+    h_train: {group: [C, ...]} H accumulated over the training views
+      (`FisherScores.h_train`).
+    key: PRNG key of the probes.
+    reg: lambda.
+    settings: `RenderSettings` (static).
+    background: [3] colour.
+    num_probes: K (static).
+    groups: parameter groups (those of `h_train`).
+
+  Returns:
+    ([H, W] estimate of u, `TileStats` of the render).
+  """
+  groups = tuple(g for g in groups if g in model.params.mean)
+  keys = jax.random.split(key, len(groups))
+  probes = {g: rademacher(k, (num_probes,) + model.params.mean[g].shape,
+                          model.params.mean[g].dtype) for g, k in zip(groups, keys, strict=True)}
+  return fisher_pixel_variance_from_probes(model, camera, h_train, probes, reg,
+                                           settings=settings, background=background,
+                                           groups=groups)

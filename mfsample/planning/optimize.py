@@ -1,4 +1,4 @@
-"""Next-best-view optimisation: Adam on -U w.r.t. the camera (paper Sec. 4.4; METHOD.md Sec. 3).
+"""Next-best-view optimisation: Adam on -U w.r.t. the camera (paper Sec. 4.4).
 
 The authors' recipe (their `active_dcam.py`): the camera on the sphere of the spherical
 parameterisation (`poses`), Adam with lr 5e-4 on (u, v) for 400 steps, M = 2 Sobol samples

@@ -1,6 +1,6 @@
 """Camera parameterisations for view optimisation: a sphere around the scene, and free 6-DoF.
 
-Spherical (the authors' code; METHOD.md Sec. 3). A camera sits on a sphere of fixed radius r
+Spherical (the authors' code). A camera sits on a sphere of fixed radius r
 around `center` and looks at it with up = +z, at
 
   u = azimuth / (2 pi),   v = polar / pi,

@@ -1,4 +1,4 @@
-"""The active camera planning protocol (paper Sec. 5.1; METHOD.md Sec. 3): pure steps, thin loop.
+"""The active camera planning protocol (paper Sec. 5.1): pure steps, thin loop.
 
 For every seed and strategy:
 
@@ -35,11 +35,13 @@ import numpy as np
 
 from mfsample import metrics as metrics_lib
 from mfsample import uncertainty as unc
-from mfsample._json import write_json
+from mfsample import workdir as workdir_lib
+from mfsample._json import atomic_path, write_json, write_text
 from mfsample.data._io import area_downscale
 from mfsample.data.views import Views
 from mfsample.model import mean_gaussians
 from mfsample.planning import figures, poses, strategies, tables, training, variance, workdirs
+from mfsample.planning.config import validate
 from mfsample.planning.pool import Pool, make_pool, stack_cameras
 from mfsample.renderer import render
 from mfsample.renderer.budget import render_with_budget
@@ -78,6 +80,9 @@ def candidate_view(pool: Pool, index) -> Selected:
 def initial_index(config, seed, num_candidates):
   """The first view: `config.initial_view`, or (if < 0) a seeded random candidate."""
   if int(config.initial_view) >= 0:
+    if int(config.initial_view) >= num_candidates:
+      raise ValueError(f"config.initial_view = {config.initial_view}: the pool has "
+                       f"{num_candidates} candidates (indices 0 .. {num_candidates - 1})")
     return int(config.initial_view)
   return int(np.random.default_rng([int(seed), 5]).integers(num_candidates))
 
@@ -274,6 +279,15 @@ def evaluate_model(model, views: Views, *, background, settings, lpips_fn=None):
   return out, settings
 
 
+def scoring_start(config):
+  """Starting settings of the strategies' renders (scores, ascents): the round models'
+  renderer (`round_train.render`: footprint rule, compositor) with a small budget, grown
+  on overflow."""
+  from mfsample.train.loop import render_settings
+
+  return render_settings(config.round_train.render).holding_budget(1 << 12)
+
+
 def choose_next(strategy, pool: Pool, config, seed, trainer: Trainer, budgets, selected,
                 available):
   """One round of a strategy: its choice of the next view after the views `selected`.
@@ -300,7 +314,8 @@ def choose_next(strategy, pool: Pool, config, seed, trainer: Trainer, budgets, s
   inputs = strategies.Inputs(
       model=model, train_cameras=stack_cameras([s.camera for s in selected]),
       candidates=pool.candidates.cameras, available=available, sphere=pool.sphere,
-      bounds=pool.bounds, background=pool.background, settings=dict(budgets),
+      bounds=pool.bounds, background=pool.background,
+      settings={"start": scoring_start(config), **budgets},
       max_views=int(config.max_views))
   key = jax.random.fold_in(jax.random.PRNGKey(int(seed)), strategies.NAMES.index(
       strategy.name) if strategy.name in strategies.NAMES else 99)
@@ -402,8 +417,9 @@ def run_camera_planning(config, workdir):
 
   Writes to `workdir`: `runs/<strategy>-seed<seed>.json` (as each finishes; existing ones
   are loaded, not recomputed), `results.json`, `table.md`, `cameras.png`, `landscape.png`
-  (+ `landscape.npz`) and `config.json`. A workdir whose finished runs used another
-  protocol is refused before anything is written (`workdirs.check_resumable`).
+  (+ `landscape.npz`) and `config.json`, each atomically. An invalid config
+  (`mfsample.planning.config.validate`) and a workdir whose finished runs used another
+  protocol (`workdirs.check_resumable`) are refused before anything is written.
 
   Returns:
     the results dict (as in `results.json`).
@@ -411,17 +427,22 @@ def run_camera_planning(config, workdir):
   from tqdm.auto import tqdm
 
   t_start = time.perf_counter()
+  validate(config)
   workdirs.check_resumable(config, workdir)
-  os.makedirs(os.path.join(workdir, "runs"), exist_ok=True)
-  with open(os.path.join(workdir, "config.json"), "w") as f:
-    f.write(config.to_json_best_effort(indent=2))
   pool = make_pool(config.data)
+  if int(config.max_views) > len(pool.candidates):
+    raise ValueError(f"config.max_views = {config.max_views}: the pool has only "
+                     f"{len(pool.candidates)} candidates")
+  initial_index(config, 0, len(pool.candidates))  # refuses an initial_view beyond the pool
+  os.makedirs(os.path.join(workdir, "runs"), exist_ok=True)
+  workdir_lib.write_config(config, workdir)
   names = list(config.strategies)
   skipped = []
   if pool.oracle is None:
     skipped = [n for n in names if strategies.make_strategy(n, config).new_poses]
     names = [n for n in names if n not in skipped]
-  todo = [(seed, name) for seed in config.seeds for name in names]
+  # Each (seed, strategy) once, even if a caller skipped `validate`.
+  todo = list(dict.fromkeys((int(seed), name) for seed in config.seeds for name in names))
   eval_views = tuple(int(n) for n in config.eval_views)
   rounds = int(config.max_views) - 1
   lpips_fn = None
@@ -466,14 +487,15 @@ def run_camera_planning(config, workdir):
   run_seconds = tables.seconds_summary(records)
   title = (f"Active camera planning on `{pool.name}`: {len(config.seeds)} seed(s), "
            f"mean ± std over seeds.")
-  with open(os.path.join(workdir, "table.md"), "w") as f:
-    f.write(tables.report_markdown(summary, paired, optimisation, run_seconds, labels,
-                                   eval_views, title))
+  write_text(os.path.join(workdir, "table.md"),
+             tables.report_markdown(summary, paired, optimisation, run_seconds, labels,
+                                    eval_views, title))
   if config.figures.enabled:
     figures.camera_figure(records, pool, os.path.join(workdir, "cameras.png"),
                           seed=int(config.seeds[0]))
     land = landscape(config, pool, trainer, budgets)
-    np.savez(os.path.join(workdir, "landscape.npz"), **land)
+    with atomic_path(os.path.join(workdir, "landscape.npz")) as tmp:
+      np.savez(tmp, **land)
     figures.landscape_figure(land, os.path.join(workdir, "landscape.png"))
   results = {
       **workdirs.pool_record(pool), "seeds": list(config.seeds), "strategies": names,
@@ -522,7 +544,7 @@ def landscape(config, pool: Pool, trainer: Trainer, budgets):
     strategy = strategies.make_strategy("ours_opt_rnd", config)
     inputs = strategies.Inputs(model, stack_cameras([sel[0].camera]), cands.cameras,
                                np.ones(len(cands), bool), pool.sphere, pool.bounds,
-                               pool.background, dict(budgets))
+                               pool.background, {"start": scoring_start(config), **budgets})
     key = jax.random.fold_in(jax.random.PRNGKey(seed), 1234)
     choice = strategy.select(inputs, key)
     out["trajectory"] = choice.info["trajectory"]

@@ -114,7 +114,9 @@ _START = RenderSettings(max_intersections=1 << 12)
 
 
 def _settings(inputs, purpose):
-  return inputs.settings.get(purpose) or _START
+  """The settings that sufficed for `purpose` last time, else the caller's starting settings
+  ("start": the round models' renderer, with a small budget), else `_START`."""
+  return inputs.settings.get(purpose) or inputs.settings.get("start") or _START
 
 
 def _small(cameras, cfg):

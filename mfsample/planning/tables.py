@@ -2,8 +2,11 @@
 seed, the view optimisation's rounds and the wall-clock, as dicts and as markdown.
 
 Pure functions of run records (`runner.run_record`); `report_markdown` assembles the
-runner's `table.md` from them.
+runner's `table.md` from them. Each (strategy, seed) run counts once (`unique_runs`): a
+record listed twice must not weigh twice in a mean or a standard error.
 """
+
+import json
 
 import numpy as np
 
@@ -13,10 +16,32 @@ METRICS = (("psnr", "PSNR", "↑"), ("ssim", "SSIM", "↑"), ("lpips", "LPIPS", 
 _DIGITS = {"psnr": 2, "ssim": 3, "lpips": 3}  # Decimals of each metric in the tables.
 
 
+def unique_runs(records):
+  """`records` with each (strategy, seed) once, in order of first appearance (records
+  without a seed cannot be matched and are all kept).
+
+  Raises:
+    ValueError: two different records of one (strategy, seed) (mixed runs).
+  """
+  seen, out = {}, []
+  for rec in records:
+    if "seed" not in rec:
+      out.append(rec)
+      continue
+    key = (rec["strategy"], int(rec["seed"]))
+    if key not in seen:
+      seen[key] = rec
+      out.append(rec)
+    elif json.dumps(seen[key], sort_keys=True) != json.dumps(rec, sort_keys=True):
+      raise ValueError(f"two different records of strategy {key[0]!r}, seed {key[1]}: "
+                       "a table counts each run once")
+  return out
+
+
 def summarise(records, eval_views):
   """{strategy: {n: {metric: {"mean", "std", "values"}}}} over seeds (std: population)."""
   out = {}
-  for rec in records:
+  for rec in unique_runs(records):
     s = out.setdefault(rec["strategy"], {"label": rec["label"]})
     for n in eval_views:
       m = rec["metrics"].get(str(n))
@@ -69,6 +94,7 @@ def paired_differences(records, eval_views, reference, metric="psnr"):
     the strategy is better: higher for PSNR / SSIM, lower for LPIPS), "seeds", "values"}}}.
   """
   higher_is_better = dict((m, arrow == "↑") for m, _, arrow in METRICS)[metric]
+  records = unique_runs(records)
   by_run = {(rec["strategy"], rec["seed"]): rec["metrics"] for rec in records}
   out = {}
   for name in dict.fromkeys(rec["strategy"] for rec in records):
@@ -122,7 +148,7 @@ def optimisation_summary(records):
   Strategies without an ascent are left out.
   """
   out = {}
-  for rec in records:
+  for rec in unique_runs(records):
     rounds = [o for o in rec.get("optimisation", []) if o and "u_start" in o]
     if not rounds:
       continue
@@ -167,7 +193,7 @@ def seconds_summary(records):
   whatever else the machine ran meanwhile.
   """
   runs, rounds = {}, {}
-  for rec in records:
+  for rec in unique_runs(records):
     runs.setdefault(rec["strategy"], []).append(rec["seconds"])
     rounds.setdefault(rec["strategy"], []).extend(rec["round_seconds"][1:])
 

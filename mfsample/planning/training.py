@@ -1,6 +1,6 @@
 """A thin adapter over `mfsample.train` for the planning protocol.
 
-The protocol trains a fresh model after every added view (METHOD.md Sec. 3). Calling
+The protocol trains a fresh model after every added view. Calling
 `mfsample.train.train` on 1, 2, ..., 9 views would compile the jitted training step nine
 times per model kind, because the step takes the stacked training images as an argument
 and their leading axis grows. `train_on_views` instead pads the images to a fixed number

@@ -7,11 +7,11 @@ that only choose which runs to do (seeds, strategies), how they are shown, or ho
 go may differ; any other difference is refused with the fields named.
 """
 
-import json
 import os
 
 from mfsample._json import without_fields
 from mfsample.train.loop import SPEED_ONLY_FIELDS
+from mfsample.workdir import check_same_config, differences  # noqa: F401 (re-exported)
 
 # Fields that may change between calls on one workdir: which runs to do, presentation,
 # and the training configs' speed-only fields (`mfsample.train.loop.SPEED_ONLY_FIELDS`).
@@ -34,35 +34,15 @@ def comparable_config(config_dict):
   return without_fields(config_dict, RESUME_FREE_FIELDS)
 
 
-def differences(old, new, prefix=""):
-  """Dotted paths of the leaves where two nested dicts differ."""
-  if not (isinstance(old, dict) and isinstance(new, dict)):
-    return [] if old == new else [prefix or "(root)"]
-  out = []
-  for key in sorted(set(old) | set(new)):
-    path = f"{prefix}.{key}" if prefix else key
-    if key not in old or key not in new:
-      out.append(path)
-    else:
-      out += differences(old[key], new[key], path)
-  return out
-
-
 def run_name(strategy, seed):
   """A run's file name in `runs/` (without `.json`)."""
   return f"{strategy}-seed{seed}"
 
 
 def check_resumable(config, workdir):
-  """Refuses to add runs to a workdir whose finished runs used a different protocol."""
-  path = os.path.join(workdir, "config.json")
+  """Refuses to add runs to a workdir whose finished runs used a different protocol
+  (`mfsample.workdir.WorkdirError`, a ValueError naming the differing fields)."""
   runs = os.path.join(workdir, "runs")
-  if not os.path.exists(path) or not (os.path.isdir(runs) and os.listdir(runs)):
-    return
-  with open(path) as f:
-    old = comparable_config(json.load(f))
-  new = comparable_config(json.loads(config.to_json_best_effort()))
-  if old != new:
-    raise ValueError(f"{workdir} holds runs made with a different config (differences: "
-                     f"{', '.join(differences(old, new))}); use a new --workdir, or remove "
-                     f"{workdir}/runs to redo them.")
+  has_runs = os.path.isdir(runs) and any(n.endswith(".json") for n in os.listdir(runs))
+  check_same_config(config, workdir, free_fields=RESUME_FREE_FIELDS, has_results=has_runs,
+                    results="runs", remedy=f"use a new --workdir, or remove {runs} to redo them")

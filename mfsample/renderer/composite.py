@@ -1,17 +1,28 @@
 """Stage 3: front-to-back alpha compositing of the chunked tile lists (3DGS rules).
 
-For pixel p and the depth-ordered Gaussians i of its tile (3DGS, Kerbl et al. 2023, Eq. 3):
+For pixel p and the depth-ordered Gaussians i of its tile (3DGS, Kerbl et al. 2023, Eq. 3),
+with o_i the opacity, d_i(p) the Mahalanobis distance of p from the projected centre and
+f_i the blended features:
 
-  alpha_i = min(alpha_max, o_i exp(-d_i(p)^2 / 2)),  skipped if alpha_i < alpha_min
-            or the Mahalanobis distance d_i(p) > radius_sigma,
+  alpha_i = min(alpha_max, o_i exp(-d_i(p)^2 / 2)),  skipped (alpha_i = 0) where
+            d_i(p) > r(o_i) = min(radius_sigma, sqrt(2 ln(o_i / alpha_min))),
+            i.e. where alpha_i < alpha_min or d_i(p) > radius_sigma,
   T_i     = prod_{j < i} (1 - alpha_j),
   C(p)    = sum_i alpha_i T_i f_i, stopping before the first i with T_i (1 - alpha_i) < T_min.
+
+The tile lists hold each Gaussian in every tile its footprint of radius r(o) sqrt(lambda_max)
+pixels touches (`projection.py`), so every pixel where the rule lets it contribute sees it.
+
+Padding slots of the lists and Gaussians culled before (masked, behind the camera,
+non-finite) contribute exactly nothing: the values gathered into padding slots are zeros,
+whatever the Gaussian slot they point at holds (a NaN included).
 
 Transmittance is accumulated in log space. Within a chunk of C Gaussians the exclusive
 prefix sum of log(1 - alpha) is one small matrix product with a strictly lower-triangular
 matrix; chunks of the same tile are chained within a step by a second such product, and
 across steps by a carry. The weighted sums of features are a batched matrix product too, so
-the inner loop is dense linear algebra on [C, tile_size^2] blocks.
+the inner loop is dense linear algebra on [C, tile_size^2] blocks. The products run in full
+float32 (`precision.py`).
 
 The loop runs over steps of `chunks_per_step` chunks. Steps past the last used chunk are
 skipped (`lax.cond`), so an over-provisioned budget costs little; each step is
@@ -26,6 +37,7 @@ import jax
 import jax.numpy as jnp
 from jax.custom_batching import custom_vmap
 
+from mfsample.renderer.precision import MATMUL
 from mfsample.renderer.tiles import TileLayout, tile_grid
 
 
@@ -60,10 +72,8 @@ def composite(layout: TileLayout, means2d, conics, opacities, features, width, h
   num_steps = settings.max_chunks // steps_g
   dtype = features.dtype
 
-  ids = layout.gaussian_ids
-
   def per_chunk(x):  # [N, ...] -> [S, G, C, ...]
-    return x[ids].reshape((num_steps, steps_g, chunk) + x.shape[1:])
+    return chunk_values(layout, x).reshape((num_steps, steps_g, chunk) + x.shape[1:])
 
   xs = _ChunkInputs(
       means2d=per_chunk(means2d),
@@ -96,21 +106,23 @@ def composite(layout: TileLayout, means2d, conics, opacities, features, width, h
     ca, cb, cc = (x.conics[:, None, :, k] for k in range(3))
     power = -0.5 * (ca * dx * dx + cc * dy * dy) - cb * dx * dy
     alpha = jnp.minimum(settings.alpha_max, x.opacities[:, None, :] * jnp.exp(power))
+    # d <= r(o): the alpha test is d <= sqrt(2 ln(o / alpha_min)), the power test the cap.
     keep = x.live[:, None, :] & (power >= cut) & (alpha >= settings.alpha_min)
     alpha = jnp.where(keep, alpha, 0.0)
     log_keep = jnp.log1p(-alpha)  # >= log(1 - alpha_max): finite
 
     # log T before each Gaussian = carry + earlier chunks of the tile + earlier in chunk.
-    within = log_keep @ strict_upper_c  # [G, P, C]
+    within = jnp.matmul(log_keep, strict_upper_c, precision=MATMUL)  # [G, P, C]
     chunk_total = jnp.sum(log_keep, axis=-1)  # [G, P]
     same_tile = strict_lower_g & (tile[:, None] == tile[None, :])
-    before_chunk = jnp.where(same_tile, 1.0, 0.0).astype(dtype) @ chunk_total
+    before_chunk = jnp.matmul(jnp.where(same_tile, 1.0, 0.0).astype(dtype), chunk_total,
+                              precision=MATMUL)
     before_chunk += jnp.where((tile == prev_tile)[:, None], prev_log_t[None, :], 0.0)
     log_t = before_chunk[:, :, None] + within
 
     include = log_t + log_keep >= log_t_min
     weight = jnp.where(include, alpha * jnp.exp(log_t), 0.0)
-    blended = jnp.einsum("gpc,gcf->gpf", weight, x.features)  # [G, P, F]
+    blended = jnp.einsum("gpc,gcf->gpf", weight, x.features, precision=MATMUL)  # [G, P, F]
     coverage = jnp.sum(weight, axis=-1)  # [G, P]
     new_carry = (tile[-1], before_chunk[-1] + chunk_total[-1])
     return new_carry, (blended, coverage)
@@ -141,9 +153,19 @@ def composite(layout: TileLayout, means2d, conics, opacities, features, width, h
                                 num_segments=num_tiles + 1, indices_are_sorted=True)
   coverage = jax.ops.segment_sum(coverage.reshape(-1, p), chunk_tile,
                                  num_segments=num_tiles + 1, indices_are_sorted=True)
-  image = _tiles_to_image(blended[:num_tiles], tiles_x, tiles_y, ts, width, height)
-  alpha = _tiles_to_image(coverage[:num_tiles, :, None], tiles_x, tiles_y, ts, width, height)
+  image = tiles_to_image(blended[:num_tiles], tiles_x, tiles_y, ts, width, height)
+  alpha = tiles_to_image(coverage[:num_tiles, :, None], tiles_x, tiles_y, ts, width, height)
   return image, alpha[..., 0]
+
+
+def chunk_values(layout: TileLayout, x):
+  """Per-Gaussian values [N, ...] -> per list slot [B, C, ...], exactly 0 on padding.
+
+  Padding slots point at Gaussian 0; a select, not a product with the mask, keeps whatever
+  Gaussian 0 holds (a NaN of a masked-out Gaussian) out of them, and its cotangent is 0.
+  """
+  live = layout.live.reshape(layout.live.shape + (1,) * (x.ndim - 1))
+  return jnp.where(live, x[layout.gaussian_ids], jnp.zeros((), x.dtype))
 
 
 @custom_vmap
@@ -162,7 +184,7 @@ def _max_over_batch_rule(axis_size, in_batched, n):
   return jnp.max(n), False
 
 
-def _tiles_to_image(tiles, tiles_x, tiles_y, ts, width, height):
+def tiles_to_image(tiles, tiles_x, tiles_y, ts, width, height):
   """[T, ts*ts, F] per-tile pixels -> [H, W, F]."""
   f = tiles.shape[-1]
   img = tiles.reshape(tiles_y, tiles_x, ts, ts, f).transpose(0, 2, 1, 3, 4)

@@ -3,6 +3,13 @@
 Zwicker et al. 2002 (EWA splatting), as used by 3DGS (Kerbl et al. 2023, Sec. 4):
 Sigma_3d = R S S^T R^T, Sigma_2d = J W Sigma_3d W^T J^T + eps2d I, with W the world-to-camera
 rotation and J the Jacobian of the perspective map at the Gaussian's centre.
+
+The screen footprint of a Gaussian of opacity o is the disc of radius r(o) sqrt(lambda_max)
+pixels, lambda_max the largest eigenvalue of Sigma_2d and
+
+  r(o) = min(radius_sigma, sqrt(2 ln(o / alpha_min)))  (Mahalanobis units),
+
+the distance beyond which its alpha o exp(-r^2 / 2) falls below alpha_min (3DGS, gsplat).
 """
 
 from typing import NamedTuple
@@ -12,6 +19,7 @@ import jax
 import jax.numpy as jnp
 
 from mfsample import numerics
+from mfsample.renderer.precision import MATMUL
 
 # 3DGS evaluates the Jacobian at the centre clamped to 1.3x the half field of view, so that
 # Gaussians far off screen do not get exploding screen-space footprints.
@@ -24,7 +32,7 @@ class Projected(NamedTuple):
   means2d: chex.Array  # [N, 2] pixel coordinates (u, v)
   conics: chex.Array  # [N, 3] inverse 2D covariance (a, b, c): [[a, b], [b, c]]
   depths: chex.Array  # [N] camera-space z
-  radii: chex.Array  # [N] screen radius in pixels (no gradient), 0 when culled
+  radii: chex.Array  # [N] screen radius in pixels of the footprint (no gradient), 0 if culled
   valid: chex.Array  # [N] bool: in front of the near plane, live, on screen
 
 
@@ -43,7 +51,23 @@ def quat_to_rotmat(quats):
 def covariance_3d(scales, quats):
   """[N, 3] scales, [N, 4] quats -> [N, 3, 3] world covariance R S S^T R^T."""
   m = quat_to_rotmat(quats) * scales[..., None, :]
-  return m @ jnp.swapaxes(m, -1, -2)
+  return jnp.matmul(m, jnp.swapaxes(m, -1, -2), precision=MATMUL)
+
+
+def footprint_sigma(opacities, settings):
+  """r(o) = min(radius_sigma, sqrt(2 ln(o / alpha_min))): [N] -> [N] Mahalanobis radii.
+
+  Where a Gaussian's alpha o exp(-d^2 / 2) reaches alpha_min, capped at `radius_sigma`. A
+  discrete quantity (it decides which tiles list the Gaussian): no gradient. Opacities at
+  or below alpha_min give 0; those Gaussians are culled anyway.
+  """
+  cap = settings.radius_sigma ** 2
+  if settings.alpha_min <= 0.0:  # no alpha cut: the cap alone
+    return jnp.full_like(opacities, settings.radius_sigma)
+  o = jax.lax.stop_gradient(opacities)
+  above = o > settings.alpha_min
+  log_ratio = jnp.log(jnp.where(above, o, 1.0) / settings.alpha_min)
+  return jnp.sqrt(jnp.where(above, jnp.minimum(cap, 2.0 * log_ratio), 0.0))
 
 
 def project_gaussians(means, scales, quats, opacities, mask, camera, settings):
@@ -64,7 +88,7 @@ def project_gaussians(means, scales, quats, opacities, mask, camera, settings):
   """
   dtype = means.dtype
   rot = camera.rotation.astype(dtype)
-  p_cam = means @ rot.T + camera.translation.astype(dtype)
+  p_cam = jnp.matmul(means, rot.T, precision=MATMUL) + camera.translation.astype(dtype)
   x, y, z = p_cam[:, 0], p_cam[:, 1], p_cam[:, 2]
   in_front = z > settings.near_plane
   z_safe = jnp.where(in_front, z, 1.0)  # double-where: culled rows never divide by ~0
@@ -89,8 +113,9 @@ def project_gaussians(means, scales, quats, opacities, mask, camera, settings):
   ], axis=-2)  # [N, 2, 3]
 
   cov_world = covariance_3d(scales, quats)
-  jw = jac @ rot  # [N, 2, 3]
-  cov2d = jw @ cov_world @ jnp.swapaxes(jw, -1, -2)
+  jw = jnp.matmul(jac, rot, precision=MATMUL)  # [N, 2, 3]
+  cov2d = jnp.matmul(jnp.matmul(jw, cov_world, precision=MATMUL), jnp.swapaxes(jw, -1, -2),
+                     precision=MATMUL)
   a = cov2d[:, 0, 0] + settings.eps2d
   b = cov2d[:, 0, 1]
   c = cov2d[:, 1, 1] + settings.eps2d
@@ -101,11 +126,11 @@ def project_gaussians(means, scales, quats, opacities, mask, camera, settings):
   det_safe = jnp.where(det_ok, det, 1.0)
   conics = jnp.stack([c, -b, a], axis=-1) / det_safe[:, None]
 
-  # Screen radius from the largest eigenvalue; a discrete quantity, no gradient.
+  # Footprint radius r(o) sqrt(lambda_max); a discrete quantity, no gradient.
   a_s, c_s, det_s = jax.lax.stop_gradient((a, c, det_safe))
   mid = 0.5 * (a_s + c_s)
   lambda_max = mid + jnp.sqrt(jnp.maximum(mid * mid - det_s, 0.0))
-  radii = settings.radius_sigma * jnp.sqrt(jnp.maximum(lambda_max, 0.0))
+  radii = footprint_sigma(opacities, settings) * jnp.sqrt(jnp.maximum(lambda_max, 0.0))
   u_s, v_s = jax.lax.stop_gradient((u, v))
   on_screen = ((u_s + radii > 0) & (u_s - radii < width)
                & (v_s + radii > 0) & (v_s - radii < height))

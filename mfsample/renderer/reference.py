@@ -3,12 +3,22 @@
 Written separately and as plainly as possible, as the ground truth that the tiled renderer is
 tested against. It shares only the quaternion and SH helpers (tested on their own). Memory is
 O(H W N): for small test scenes only.
+
+The rasterisation rule, literally: Gaussian i contributes at pixel p iff its Mahalanobis
+distance d_i(p) <= r(o_i) = min(radius_sigma, sqrt(2 ln(o_i / alpha_min))) and its alpha is
+at least alpha_min (the same thing but for rounding at the boundary). Every product runs in
+full float32 (`precision.py`), so that it is a reference on a GPU too.
 """
+
+import functools
 
 import jax.numpy as jnp
 
+from mfsample.renderer.precision import MATMUL
 from mfsample.renderer.projection import quat_to_rotmat
 from mfsample.renderer.sh import sh_to_color
+
+_mm = functools.partial(jnp.matmul, precision=MATMUL)
 
 
 def render_reference(gaussians, camera, *, background=None, settings, features=None):
@@ -20,7 +30,7 @@ def render_reference(gaussians, camera, *, background=None, settings, features=N
   rot, trans = camera.world_to_camera[:3, :3], camera.world_to_camera[:3, 3]
 
   # Camera-space centres and the 3DGS perspective Jacobian (clamped to 1.3x the FOV).
-  pc = means @ rot.T + trans
+  pc = _mm(means, rot.T) + trans
   x, y, z = pc[:, 0], pc[:, 1], pc[:, 2]
   alive = z > s.near_plane
   if gaussians.mask is not None:
@@ -38,9 +48,9 @@ def render_reference(gaussians, camera, *, background=None, settings, features=N
   jac = jac.at[:, 1, 1].set(fy / z).at[:, 1, 2].set(-fy * yc / z**2)
 
   rmat = quat_to_rotmat(quats)
-  sigma = rmat @ (jnp.eye(3, dtype=means.dtype) * scales[:, None, :] ** 2) @ jnp.swapaxes(
-      rmat, 1, 2)
-  cov2d = jac @ rot @ sigma @ rot.T @ jnp.swapaxes(jac, 1, 2)
+  sigma = _mm(_mm(rmat, jnp.eye(3, dtype=means.dtype) * scales[:, None, :] ** 2),
+              jnp.swapaxes(rmat, 1, 2))
+  cov2d = _mm(_mm(_mm(_mm(jac, rot), sigma), rot.T), jnp.swapaxes(jac, 1, 2))
   cov2d = cov2d + s.eps2d * jnp.eye(2, dtype=means.dtype)
   inv = jnp.linalg.inv(cov2d)  # [N, 2, 2]
   mean2d = jnp.stack([fx * x / z + cx, fy * y / z + cy], axis=-1)
@@ -59,11 +69,14 @@ def render_reference(gaussians, camera, *, background=None, settings, features=N
   jj, ii = jnp.meshgrid(jnp.arange(w), jnp.arange(h))
   pix = jnp.stack([jj, ii], axis=-1).reshape(-1, 2).astype(means.dtype) + 0.5  # [P, 2]
   d = pix[:, None, :] - mean2d[order][None, :, :]  # [P, N, 2]
-  maha = jnp.einsum("pni,nij,pnj->pn", d, inv[order], d)
-  alpha = jnp.minimum(s.alpha_max,
-                      gaussians.opacities[order][None, :] * jnp.exp(-0.5 * maha))
-  use = (alive[order][None, :] & (maha <= s.radius_sigma**2) & (alpha >= s.alpha_min)
-         & (gaussians.opacities[order][None, :] >= s.alpha_min))
+  maha = jnp.einsum("pni,nij,pnj->pn", d, inv[order], d, precision=MATMUL)  # d_i(p)^2
+  opacity = gaussians.opacities[order][None, :]
+  alpha = jnp.minimum(s.alpha_max, opacity * jnp.exp(-0.5 * maha))
+  r2 = jnp.full_like(opacity, s.radius_sigma**2)  # r(o)^2
+  if s.alpha_min > 0:
+    r2 = jnp.minimum(r2, 2.0 * jnp.log(jnp.maximum(opacity, 1e-30) / s.alpha_min))
+  use = (alive[order][None, :] & (maha <= r2) & (alpha >= s.alpha_min)
+         & (opacity >= s.alpha_min))
   alpha = jnp.where(use, alpha, 0.0)
   trans_before = jnp.cumprod(
       jnp.concatenate([jnp.ones_like(alpha[:, :1]), 1.0 - alpha[:, :-1]], axis=1), axis=1)
@@ -71,8 +84,8 @@ def render_reference(gaussians, camera, *, background=None, settings, features=N
   stop = trans_before * (1.0 - alpha) < s.transmittance_min
   stopped = jnp.cumsum(stop, axis=1) > 0
   weight = jnp.where(stopped, 0.0, alpha * trans_before)
-  rgb = weight @ colors[order] + (1.0 - weight.sum(1))[:, None] * background
-  depth = weight @ jnp.where(alive, z, 0.0)[order]
+  rgb = _mm(weight, colors[order]) + (1.0 - weight.sum(1))[:, None] * background
+  depth = _mm(weight, jnp.where(alive, z, 0.0)[order])
   alpha_img = weight.sum(1)
   return (rgb.reshape(h, w, -1), alpha_img.reshape(h, w), depth.reshape(h, w))
 

@@ -11,6 +11,7 @@ from mfsample.camera import Camera
 from mfsample.gaussians import Gaussians
 from mfsample.renderer import sh as sh_lib
 from mfsample.renderer.composite import composite
+from mfsample.renderer.composite_pallas import composite_pallas
 from mfsample.renderer.projection import project_gaussians, view_directions
 from mfsample.renderer.settings import RenderSettings
 from mfsample.renderer.tiles import TileStats, intersect_tiles
@@ -54,6 +55,14 @@ def render(gaussians: Gaussians, camera: Camera, *, background=None,
   outside `jax.jit` is compiled too and is inlined inside one; vmap it over a batched
   `Camera` or a batched `Gaussians` (leading axis on every leaf).
 
+  A Gaussian contributes at a pixel where its alpha is >= `settings.alpha_min`, within
+  `settings.radius_sigma` standard deviations (`RenderSettings` states the rule).
+
+  Robustness: a Gaussian that is masked out, or has any non-finite parameter (mean, scale,
+  quaternion, opacity, SH coefficient, or its row of `features` or `screen_offset`), is
+  culled: it contributes exactly nothing, cannot turn other pixels into NaN, has
+  `visible` False and radius 0, and receives zero gradients (not NaN).
+
   Args:
     gaussians: `Gaussians` with N >= 0 entries (unbatched).
     camera: an unbatched `Camera`.
@@ -66,13 +75,16 @@ def render(gaussians: Gaussians, camera: Camera, *, background=None,
       centres, which 3DGS densification thresholds (Kerbl et al. 2023, Sec. 5.2).
 
   Returns:
-    `RenderOutput`.
+    `RenderOutput`; all NaN for an invalid camera (`Camera.valid` is False).
   """
   if not isinstance(camera, Camera):
     raise TypeError(f"camera must be a mfsample.Camera, got {type(camera).__name__}")
   if camera.batch_shape:
     raise ValueError(f"render takes one camera; got a batch {camera.batch_shape}. "
                      "Use jax.vmap over the camera for batches.")
+  # An invalid camera (`Camera.valid`: non-finite or non-rigid pose, fx or fy <= 0) cannot
+  # raise under jit: its images are NaN, which every finiteness check downstream catches.
+  nan_if_invalid = jnp.where(camera.valid, 0.0, jnp.nan)
   gaussians.validate()
   dtype = gaussians.means.dtype
   n = gaussians.num_gaussians
@@ -92,6 +104,9 @@ def render(gaussians: Gaussians, camera: Camera, *, background=None,
     if screen_offset is not None:
       screen_offset = jnp.zeros((1, 2), dtype)
 
+  finite = _finite_rows(gaussians, features, screen_offset)
+  gaussians, features, screen_offset = _cull_non_finite(finite, gaussians, features,
+                                                        screen_offset)
   proj = project_gaussians(gaussians.means, gaussians.scales, gaussians.quats,
                            gaussians.opacities, gaussians.mask, camera, settings)
   if features is None:
@@ -111,9 +126,48 @@ def render(gaussians: Gaussians, camera: Camera, *, background=None,
   layout = intersect_tiles(proj, camera.width, camera.height, settings)
   blend_in = jnp.concatenate([colors, proj.depths[:, None]], axis=-1)
   opacities = jnp.where(proj.valid, gaussians.opacities, 0.0)
-  blended, alpha = composite(layout, means2d, proj.conics, opacities, blend_in,
-                             camera.width, camera.height, settings)
+  composite_fn = composite_pallas if settings.compositor == "pallas" else composite
+  blended, alpha = composite_fn(layout, means2d, proj.conics, opacities, blend_in,
+                                camera.width, camera.height, settings)
   rgb = blended[..., :num_channels] + (1.0 - alpha)[..., None] * background
-  return RenderOutput(rgb=rgb, alpha=alpha, depth=blended[..., num_channels],
+  return RenderOutput(rgb=rgb + nan_if_invalid, alpha=alpha + nan_if_invalid,
+                      depth=blended[..., num_channels] + nan_if_invalid,
                       stats=layout.stats, radii=proj.radii[:n], visible=proj.valid[:n])
 
+
+def _finite_rows(gaussians, features, screen_offset):
+  """[N] bool: every parameter of the Gaussian (and its optional rows) is finite."""
+  def rows(x):
+    return jnp.all(jnp.isfinite(x).reshape(x.shape[0], -1), axis=-1)
+
+  arrays = [gaussians.means, gaussians.scales, gaussians.quats, gaussians.opacities,
+            gaussians.sh]
+  arrays += [x for x in (features, screen_offset) if x is not None]
+  return functools.reduce(jnp.logical_and, [rows(x) for x in arrays])
+
+
+def _cull_non_finite(finite, gaussians, features, screen_offset):
+  """Replaces non-finite rows by a masked placeholder Gaussian (before any arithmetic).
+
+  A select on the inputs, not a mask applied later: downstream arithmetic never sees the
+  non-finite values, so nothing computes NaN * 0, and the cotangent of a replaced row is 0.
+  """
+  placeholder = Gaussians.empty(1, gaussians.sh_degree, gaussians.means.dtype)
+
+  def clean(x, safe):
+    keep = finite.reshape((-1,) + (1,) * (x.ndim - 1))
+    return jnp.where(keep, x, safe.astype(x.dtype))
+
+  mask = finite if gaussians.mask is None else gaussians.mask & finite
+  gaussians = Gaussians(
+      means=clean(gaussians.means, placeholder.means),
+      scales=clean(gaussians.scales, placeholder.scales),
+      quats=clean(gaussians.quats, placeholder.quats),
+      opacities=clean(gaussians.opacities, placeholder.opacities),
+      sh=clean(gaussians.sh, placeholder.sh),
+      mask=mask)
+  if features is not None:
+    features = clean(features, jnp.zeros((), features.dtype))
+  if screen_offset is not None:
+    screen_offset = clean(screen_offset, jnp.zeros((), screen_offset.dtype))
+  return gaussians, features, screen_offset

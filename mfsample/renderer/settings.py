@@ -2,10 +2,23 @@
 
 import dataclasses
 
+COMPOSITORS = ("jnp", "pallas")
+SEARCHSORTED_METHODS = ("scan", "scan_unrolled", "sort", "compare_all")
+
 
 @dataclasses.dataclass(frozen=True)
 class RenderSettings:
   """Everything about a render that is not a differentiable input.
+
+  The rasterisation rule (as in INRIA 3DGS and gsplat): a Gaussian of opacity o contributes
+  at a pixel p iff its Mahalanobis distance d(p) satisfies
+
+    d(p) <= r(o) = min(radius_sigma, sqrt(2 ln(o / alpha_min))),
+
+  which is exactly where its alpha o exp(-d^2 / 2) is >= alpha_min, up to the cap
+  `radius_sigma`. Its screen footprint, which decides the tiles it is listed in, has the
+  same radius r(o) sqrt(lambda_max) (lambda_max: the largest eigenvalue of its 2D
+  covariance), so the image does not depend on `tile_size`.
 
   Attributes:
     tile_size: side of a square screen tile in pixels.
@@ -16,16 +29,23 @@ class RenderSettings:
     near_plane: Gaussians whose centre has camera depth z < near_plane are culled.
     eps2d: isotropic screen-space dilation added to every 2D covariance (pixels^2); a
       low-pass filter that also keeps the 2D covariance invertible.
-    radius_sigma: a Gaussian affects only pixels within this many standard deviations
-      (Mahalanobis distance); its screen bounding box uses the same radius. With this cut
-      the image does not depend on `tile_size`.
+    radius_sigma: cap of the footprint radius r(o) above, in standard deviations. At the
+      default 3.33 = sqrt(2 ln 255) the alpha rule binds for every opacity <= 1, as in
+      gsplat. 3.0 reproduces the images of the renderer before the alpha rule, which cut
+      every Gaussian at 3 sigma.
     max_intersections: budget of (tile, Gaussian) pairs, counted after padding each tile's
       list to a multiple of `chunk_size`. Exceeding it sets `stats.overflow`; see
       `mfsample.renderer.fit_budget` to grow it. Must be a multiple of
       chunk_size * chunks_per_step.
     chunk_size: Gaussians composited together in one dense block (per tile).
-    chunks_per_step: chunks processed per step of the compositing loop; the backward pass
-      keeps the activations of one step only, so this bounds memory.
+    chunks_per_step: chunks processed per step of the jnp compositor's loop; the backward
+      pass keeps the activations of one step only, so this bounds memory. A speed knob:
+      results agree to float rounding for any value.
+    compositor: "jnp" (default; the pure jax.numpy compositor, `composite.py`) or "pallas"
+      (a Pallas kernel, one program per tile, `composite_pallas.py`; meant for GPUs, run by
+      the Pallas interpreter on a CPU). Its tile_size and chunk_size must be powers of two.
+    searchsorted_method: `jnp.searchsorted`'s method in the tile intersection ("scan",
+      "scan_unrolled", "sort", "compare_all"); a speed knob with identical results.
   """
 
   tile_size: int = 16
@@ -34,10 +54,12 @@ class RenderSettings:
   transmittance_min: float = 1e-4
   near_plane: float = 0.2
   eps2d: float = 0.3
-  radius_sigma: float = 3.0
+  radius_sigma: float = 3.33
   max_intersections: int = 1 << 16
   chunk_size: int = 32
   chunks_per_step: int = 16
+  compositor: str = "jnp"
+  searchsorted_method: str = "scan"
 
   def __post_init__(self):
     if self.tile_size < 1:
@@ -57,6 +79,17 @@ class RenderSettings:
       raise ValueError(
           f"max_intersections ({self.max_intersections}) must be a positive multiple of "
           f"chunk_size * chunks_per_step ({step}).")
+    if self.compositor not in COMPOSITORS:
+      raise ValueError(f"compositor must be one of {COMPOSITORS}, got {self.compositor!r}")
+    if self.compositor == "pallas" and not (_is_power_of_two(self.tile_size)
+                                            and _is_power_of_two(self.chunk_size)):
+      # The kernel works on [tile_size^2, chunk_size] blocks; GPU kernel languages (Triton)
+      # need block sides that are powers of two.
+      raise ValueError("the pallas compositor needs tile_size and chunk_size to be powers "
+                       f"of two, got {self.tile_size} and {self.chunk_size}")
+    if self.searchsorted_method not in SEARCHSORTED_METHODS:
+      raise ValueError(f"searchsorted_method must be one of {SEARCHSORTED_METHODS}, got "
+                       f"{self.searchsorted_method!r}")
 
   @property
   def max_chunks(self):
@@ -78,3 +111,7 @@ class RenderSettings:
 
   def replace(self, **changes):
     return dataclasses.replace(self, **changes)
+
+
+def _is_power_of_two(n):
+  return n >= 1 and n & (n - 1) == 0

@@ -9,6 +9,7 @@ oracle (`mfsample.scenes`) and drives relighting, so it lives in one place.
 import jax.numpy as jnp
 
 from mfsample.gaussians import sh_degree_from_size
+from mfsample.renderer.precision import MATMUL
 
 _C0 = 0.28209479177387814
 _C1 = 0.4886025119029199
@@ -73,7 +74,7 @@ def eval_sh(coeffs, dirs):
   """
   degree = sh_degree_from_size(coeffs.shape[-2])
   basis = sh_basis(dirs, degree)
-  return jnp.einsum("...k,...kc->...c", basis, coeffs)
+  return jnp.einsum("...k,...kc->...c", basis, coeffs, precision=MATMUL)
 
 
 def sh_to_color(coeffs, dirs):

@@ -1,6 +1,7 @@
 """Stage 2: tile intersection, sorted by tile then depth, laid out in fixed-size chunks.
 
-Every screen-space Gaussian is paired with the tiles its bounding square overlaps. The
+Every screen-space Gaussian is paired with the tiles its bounding square overlaps (the square
+around its footprint, of radius `Projected.radii`: `mfsample.renderer.projection`). The
 pairs are generated in front-to-back order (Gaussians are depth-sorted first) and stably
 sorted by tile, so each tile's list is depth-ordered. Each tile's list is then padded to a
 multiple of `chunk_size` so that a chunk belongs to exactly one tile: the compositor then
@@ -9,6 +10,7 @@ total padded length, `settings.max_intersections`; exceeding it is reported in `
 never silently hidden.
 """
 
+import functools
 from typing import NamedTuple
 
 import chex
@@ -89,7 +91,8 @@ def intersect_tiles(projected, width, height, settings):
   num_pairs = ends[-1]
 
   slot = jnp.arange(max_pairs, dtype=jnp.int32)
-  rank = jnp.searchsorted(ends, slot, side="right").astype(jnp.int32)
+  search = functools.partial(jnp.searchsorted, method=settings.searchsorted_method)
+  rank = search(ends, slot, side="right").astype(jnp.int32)
   rank = jnp.minimum(rank, order.shape[0] - 1)
   gid = order[rank]
   local = slot - (ends[rank] - counts_sorted[rank])
@@ -100,8 +103,8 @@ def intersect_tiles(projected, width, height, settings):
   gid_sorted = order[rank_sorted]
 
   # Per-tile ranges in the sorted list, and their chunk counts after padding.
-  boundaries = jnp.searchsorted(tile_sorted, jnp.arange(num_tiles + 1, dtype=jnp.int32),
-                                side="left").astype(jnp.int32)
+  boundaries = search(tile_sorted, jnp.arange(num_tiles + 1, dtype=jnp.int32),
+                      side="left").astype(jnp.int32)
   tile_start = boundaries[:-1]
   tile_count = boundaries[1:] - tile_start
   tile_chunks = -(-tile_count // chunk)
@@ -109,7 +112,7 @@ def intersect_tiles(projected, width, height, settings):
   num_chunks = chunk_ends[-1]
 
   b = jnp.arange(max_chunks, dtype=jnp.int32)
-  chunk_tile = jnp.searchsorted(chunk_ends, b, side="right").astype(jnp.int32)
+  chunk_tile = search(chunk_ends, b, side="right").astype(jnp.int32)
   in_use = chunk_tile < num_tiles
   t = jnp.minimum(chunk_tile, num_tiles - 1)
   first = (b - (chunk_ends[t] - tile_chunks[t])) * chunk  # position within the tile
@@ -136,8 +139,8 @@ def _sort_by_tile_then_rank(tile, rank, num_tiles, num_gaussians):
   """Sorts pairs by tile, then by depth rank: each tile's list in front-to-back order.
 
   When both fit, they are packed into one int32 key (tile * N + rank, unique per pair):
-  XLA sorts one int32 array about 5x faster on a CPU than it stably sorts the two arrays
-  (`benchmarks/step_parts.py`), and the renderer sorts its whole budget every call.
+  XLA sorts one int32 array several times faster on a CPU than it stably sorts the two
+  arrays, and the renderer sorts its whole budget every call.
   """
   if (num_tiles + 1) * num_gaussians <= jnp.iinfo(jnp.int32).max:
     key = jnp.sort(tile * num_gaussians + rank)

@@ -63,18 +63,34 @@ def entry_path(cache_dir, scene, kind, key):
   return Path(cache_dir) / scene.name / f"{kind}-{key[:32]}.npz"
 
 
-def load(path):
-  """The arrays stored at `path` as a dict, or None when absent or unreadable."""
+def load(path, expected=None):
+  """The arrays stored at `path` as a dict, or None when absent or unusable.
+
+  An unusable entry (unreadable, or - when `expected` = {name: shape} is given - missing an
+  array, of another shape, or not finite) is reported with a warning naming the file and
+  treated as absent, so the caller recomputes and overwrites it.
+  """
   path = Path(path)
   if not path.is_file():
     return None
   try:
     with np.load(path, allow_pickle=False) as data:
-      return {k: data[k] for k in data.files}
+      arrays = {k: data[k] for k in data.files}
   except (OSError, ValueError, EOFError, zipfile.BadZipFile) as e:
     # Only a file written by other means can be corrupt (ours are atomic): recompute it.
     warnings.warn(f"ignoring unreadable cache entry {path}: {e}", stacklevel=2)
     return None
+  for name, shape in (expected or {}).items():
+    value = arrays.get(name)
+    problem = ("has no array " + repr(name) if value is None
+               else f"{name} has shape {value.shape}, expected {tuple(shape)}"
+               if value.shape != tuple(shape)
+               else f"{name} has non-finite values" if not np.all(np.isfinite(value))
+               else None)
+    if problem:
+      warnings.warn(f"ignoring unusable cache entry {path}: {problem}", stacklevel=2)
+      return None
+  return arrays
 
 
 def save(path, arrays):

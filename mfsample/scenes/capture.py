@@ -21,10 +21,9 @@ from mfsample.renderer import sh as sh_lib
 from mfsample.scenes import cache as cache_lib
 from mfsample.scenes import mitsuba_bridge as bridge
 
-# Samples per pixel of ordinary captures (a perfect square: stratified sampling). Measured
-# with benchmarks/capture.py --pool: 100 + 50 views of the default scene at 100x100 in 220 s
-# on two cores shared with other jobs (load average ~5; ~0.9 s per view when less loaded),
-# under the 5-minute budget.
+# Samples per pixel of ordinary captures (a perfect square: stratified sampling): about
+# 1 s per 100 x 100 view with the scalar variant, 0.1 s with the LLVM one
+# (benchmarks/capture.py).
 DEFAULT_SPP = 36
 # SH basis captures render 2 (degree + 1)^2 - 1 = 31 lights per camera at degree 3.
 DEFAULT_SH_SPP = 16
@@ -117,7 +116,8 @@ def capture_sh_basis(scene, camera, *, degree=3, spp=DEFAULT_SH_SPP, cache_dir=N
   path = cache_lib.entry_path(cache_dir or cache_lib.default_cache_dir(), scene, "sh_basis",
                               key)
   if cache:
-    stored = cache_lib.load(path)
+    size = (camera.height, camera.width)
+    stored = cache_lib.load(path, {"basis": ((degree + 1) ** 2,) + size + (3,)})
     if stored is not None:
       return stored["basis"]
   basis = sh_environment_texels(degree)
@@ -195,7 +195,9 @@ def _capture_entries(scene, cameras, *, spp, cache_dir, variant, cache, progress
     key = cache_lib.capture_key("rgbad", scene, camera, spp=spp, variant=variant,
                                 sampler=bridge.SAMPLER)
     path = cache_lib.entry_path(root, scene, "rgbad", key)
-    entry = cache_lib.load(path) if cache else None
+    size = (camera.height, camera.width)
+    entry = cache_lib.load(path, {"radiance": size + (3,), "alpha": size,
+                                  "depth": size}) if cache else None
     if entry is None:
       if mi_scene is None:
         mi_scene = bridge.build_scene(scene, variant)

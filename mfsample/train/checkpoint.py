@@ -14,11 +14,23 @@ exactly where the killed one stopped.
 import json
 import os
 import re
+import zipfile
+import zlib
 
 import jax
 import numpy as np
 
 _PATTERN = re.compile(r"^ckpt_(\d+)\.npz$")
+
+# What reading a damaged .npz raises: a truncated or overwritten zip (BadZipFile, EOFError,
+# OSError), a corrupt member (zlib.error, ValueError from numpy's header parser), a missing
+# metadata entry (KeyError) or metadata that is not JSON.
+_READ_ERRORS = (zipfile.BadZipFile, EOFError, OSError, zlib.error, ValueError, KeyError,
+                json.JSONDecodeError)
+
+
+class CorruptCheckpointError(ValueError):
+  """A checkpoint file that cannot be read (the message names the file and the cause)."""
 
 
 def _flatten(tree):
@@ -37,6 +49,8 @@ def save_checkpoint(directory, state, meta, keep=2):
   Returns:
     the path written.
   """
+  if isinstance(keep, bool) or not isinstance(keep, (int, np.integer)) or keep < 1:
+    raise ValueError(f"keep = {keep!r}: must be an integer >= 1 (checkpoints to keep)")
   os.makedirs(directory, exist_ok=True)
   step = int(meta["step"])
   arrays = _flatten(state)
@@ -50,7 +64,7 @@ def save_checkpoint(directory, state, meta, keep=2):
     f.flush()
     os.fsync(f.fileno())
   os.replace(tmp, path)
-  for old in list_checkpoints(directory)[:-keep] if keep else []:
+  for old in list_checkpoints(directory)[:-int(keep)]:
     os.remove(old)
   return path
 
@@ -65,9 +79,16 @@ def list_checkpoints(directory):
 
 
 def read_meta(path):
-  """The metadata dict of a checkpoint file."""
-  with np.load(path) as data:
-    return json.loads(str(data["__meta__"]))
+  """The metadata dict of a checkpoint file (`CorruptCheckpointError` if unreadable)."""
+  try:
+    with np.load(path, allow_pickle=False) as data:
+      meta = json.loads(str(data["__meta__"]))
+  except _READ_ERRORS as e:
+    raise CorruptCheckpointError(f"checkpoint {path} is unreadable "
+                                 f"({type(e).__name__}: {e})") from e
+  if not isinstance(meta, dict) or not isinstance(meta.get("step"), int):
+    raise CorruptCheckpointError(f"checkpoint {path} has no valid metadata")
+  return meta
 
 
 def restore_checkpoint(path, template):
@@ -81,20 +102,27 @@ def restore_checkpoint(path, template):
     (state, meta).
 
   Raises:
+    CorruptCheckpointError: the file cannot be read.
     ValueError: if the structure or a shape does not match.
   """
   leaves, treedef = jax.tree_util.tree_flatten_with_path(template)
-  with np.load(path) as data:
-    meta = json.loads(str(data["__meta__"]))
-    saved = set(data.files) - {"__meta__"}
-    names = [jax.tree_util.keystr(p) for p, _ in leaves]
-    if saved != set(names):
-      raise ValueError(f"checkpoint {path} does not match the state structure: "
-                       f"missing {sorted(set(names) - saved)}, extra {sorted(saved - set(names))}")
-    out = []
-    for name, (_, leaf) in zip(names, leaves, strict=True):
-      value = data[name]
-      if value.shape != np.shape(leaf):
-        raise ValueError(f"{name}: checkpoint shape {value.shape} != template {np.shape(leaf)}")
-      out.append(jax.numpy.asarray(value, dtype=np.asarray(leaf).dtype))
+  names = [jax.tree_util.keystr(p) for p, _ in leaves]
+  meta = read_meta(path)
+  try:
+    with np.load(path, allow_pickle=False) as data:
+      saved = set(data.files) - {"__meta__"}
+      values = {name: data[name] for name in names if name in saved}
+  except _READ_ERRORS as e:
+    raise CorruptCheckpointError(f"checkpoint {path} is unreadable "
+                                 f"({type(e).__name__}: {e})") from e
+  if saved != set(names):
+    raise ValueError(f"checkpoint {path} does not match the state structure: missing "
+                     f"{sorted(set(names) - saved)}, extra {sorted(saved - set(names))}")
+  out = []
+  for name, (_, leaf) in zip(names, leaves, strict=True):
+    value = values[name]
+    if value.shape != np.shape(leaf):
+      raise ValueError(f"checkpoint {path}: {name} has shape {value.shape}, the state "
+                       f"{np.shape(leaf)}")
+    out.append(jax.numpy.asarray(value, dtype=np.asarray(leaf).dtype))
   return jax.tree_util.tree_unflatten(treedef, out), meta

@@ -10,7 +10,8 @@ follow the authors' public code, where the paper is silent.
 import ml_collections
 from ml_collections import config_dict
 
-from mfsample.model import GROUPS
+from mfsample import config_checks
+from mfsample.model import GROUPS, SAMPLER_KINDS
 
 
 def default_config():
@@ -128,6 +129,13 @@ def default_config():
   # float rounding). 16 is fastest on CPU (`benchmarks/render.py --chunks_per_step`); a GPU,
   # where each step's launch latency dominates small steps, may want many more.
   render.chunks_per_step = 16
+  # A Gaussian reaches min(radius_sigma, sqrt(2 ln(opacity / alpha_min))) standard
+  # deviations: 3.33 lets the alpha rule of 3DGS / gsplat decide; 3.0 reproduces results
+  # made with mfsample's former 3-sigma cut (docs/renderer.md).
+  render.radius_sigma = 3.33
+  # Compositor: "jnp" (every backend, the reference) or "pallas" (the GPU kernel; on a CPU
+  # it runs interpreted, slowly). Speed only: the images agree to float rounding.
+  render.compositor = "jnp"
 
   # ----------------------------------------------------------------- training
   config.train = train = ml_collections.ConfigDict()  # The loop.
@@ -143,4 +151,108 @@ def default_config():
   ev.uncertainty_samples = 2  # Samples of the per-pixel uncertainty maps (paper: M = 2).
   ev.save_images = 8  # Test views whose render / ground truth / uncertainty are written.
   ev.export_ply = True  # Write the mean model as point_cloud.ply (3DGS layout).
+  return config
+
+
+# Data kinds `mfsample.train.data.load_dataset` reads (a new kind adds its name here).
+DATA_KINDS = ("synthetic", "blender", "scene")
+LPIPS_NETS = ("", "vgg16", "alexnet")
+
+
+def validate(config, prefix="config"):
+  """Checks every field of a training config; `ConfigError` naming the field and its range.
+
+  Called by `train` and `train_and_evaluate` before anything is computed or written, and by
+  the planning protocol for its round and final training configs (`prefix` names them:
+  "config.round_train"). Fields are checked whatever `data.kind` is: a bad value is refused
+  even where it would be unused, so a typo never lies dormant until a variant uses it.
+
+  Returns:
+    `config`.
+  """
+  c = config_checks
+  kw = {"prefix": prefix}
+  c.check_int(config, "seed", minimum=0, maximum=2**31 - 1, **kw)
+
+  c.check_choice(config, "data.kind", DATA_KINDS, **kw)
+  c.check_str(config, "data.path", **kw)
+  c.check_int(config, "data.downscale", minimum=1, **kw)
+  c.check_int(config, "data.test_every", minimum=1, **kw)
+  c.check_str(config, "data.scene", non_empty=True, **kw)
+  for field in ("width", "height", "num_train", "num_test"):
+    c.check_int(config, f"data.{field}", minimum=1, **kw)
+  c.check_int(config, "data.spp", minimum=1, optional=True, **kw)
+  c.check_str(config, "data.cache_dir", optional=True, **kw)
+  c.check_floats(config, "data.background", 3, minimum=0.0, maximum=1.0, **kw)
+  c.check_floats(config, "data.init_bounds", 2, increasing=True, **kw)
+  c.check_float(config, "data.extent", above=0.0, optional=True, **kw)
+  for field in ("num_gaussians", "num_train", "num_test", "width", "height"):
+    c.check_int(config, f"data.synthetic.{field}", minimum=1, **kw)
+  c.check_int(config, "data.synthetic.sh_degree", minimum=0, maximum=3, **kw)
+  c.check_float(config, "data.synthetic.distance", above=0.0, **kw)
+  c.check_int(config, "data.synthetic.seed", minimum=0, **kw)
+
+  c.check_int(config, "model.sh_degree", minimum=0, maximum=3, **kw)
+  c.check_int(config, "model.init_points", minimum=1, **kw)
+  c.check_float(config, "model.init_opacity", above=0.0, below=1.0, **kw)
+  c.check_int(config, "model.max_gaussians", minimum=1, **kw)
+
+  c.check_choice(config, "sampler.kind", SAMPLER_KINDS, **kw)
+  c.check_int(config, "sampler.rank", minimum=1, **kw)
+  c.check_sequence(config, "sampler.groups", item_choices=GROUPS, min_length=0, distinct=True,
+                   **kw)
+  c.check_int(config, "sampler.num_samples", minimum=1, **kw)
+  c.check_int(config, "sampler.stochastic_until", minimum=0, optional=True, **kw)
+  c.check_choice(config, "sampler.z", ("sobol", "uniform"), **kw)
+  c.check_int(config, "sampler.z_seed", minimum=0, maximum=2**32 - 1, **kw)
+  c.check_float(config, "sampler.init_scale", minimum=0.0, **kw)
+  c.check_sequence(config, "sampler.init_extent_groups", item_choices=GROUPS, min_length=0,
+                   distinct=True, **kw)
+  for group in GROUPS:
+    c.check_float(config, f"sampler.bounds.{group}", above=0.0, **kw)
+    c.check_float(config, f"sampler.lr.{group}", minimum=0.0, **kw)
+
+  c.check_float(config, "loss.ssim_weight", minimum=0.0, maximum=1.0, **kw)
+  c.check_float(config, "loss.volume_weight", minimum=0.0, optional=True, **kw)
+  c.check_int(config, "loss.volume_every", minimum=1, **kw)
+  c.check_int(config, "loss.volume_stop_before_end", minimum=0, **kw)
+
+  c.check_float(config, "optim.position_lr_init", above=0.0, **kw)  # log-linear decay
+  c.check_float(config, "optim.position_lr_final", above=0.0, **kw)
+  c.check_int(config, "optim.position_lr_max_steps", minimum=1, optional=True, **kw)
+  for group in GROUPS[1:]:
+    c.check_float(config, f"optim.{group}", minimum=0.0, **kw)
+
+  for field in ("start", "stop", "prune_big_after"):
+    c.check_int(config, f"densify.{field}", minimum=0, **kw)
+  for field in ("every", "opacity_reset_every", "sh_degree_every"):
+    c.check_int(config, f"densify.{field}", minimum=1, **kw)
+  c.check_float(config, "densify.grad_threshold", minimum=0.0, **kw)
+  c.check_float(config, "densify.percent_dense", minimum=0.0, **kw)
+  c.check_float(config, "densify.min_opacity", minimum=0.0, below=1.0, **kw)
+  c.check_float(config, "densify.max_world_size", above=0.0, **kw)
+  c.check_float(config, "densify.max_screen_size", minimum=0.0, **kw)
+
+  c.check_int(config, "render.max_intersections", minimum=1, **kw)
+  c.check_int(config, "render.max_budget", minimum=1, **kw)
+  c.check_order(config, "render.max_intersections", "render.max_budget", **kw)
+  c.check_int(config, "render.tile_size", minimum=1, **kw)
+  if "chunks_per_step" in config.render:
+    c.check_int(config, "render.chunks_per_step", minimum=1, **kw)
+  c.check_float(config, "render.radius_sigma", above=0.0, **kw)
+  c.check_choice(config, "render.compositor", ("jnp", "pallas"), **kw)
+
+  c.check_int(config, "train.num_steps", minimum=1, **kw)
+  c.check_int(config, "train.checkpoint_every", minimum=1, **kw)
+  c.check_int(config, "train.keep_checkpoints", minimum=1, **kw)
+  c.check_int(config, "train.log_every", minimum=1, **kw)
+  c.check_bool(config, "train.progress", **kw)
+
+  c.check_choice(config, "eval.lpips_net", LPIPS_NETS, **kw)
+  samples = c.check_int(config, "eval.uncertainty_samples", minimum=0, **kw)
+  if samples == 1:  # the variance of one sample is 0: an all-zero map, not an estimate
+    raise config_checks.ConfigError(f"{prefix}.eval.uncertainty_samples = 1: must be 0 (no "
+                                    "uncertainty maps) or >= 2")
+  c.check_int(config, "eval.save_images", minimum=0, **kw)
+  c.check_bool(config, "eval.export_ply", **kw)
   return config

@@ -9,7 +9,7 @@ grows.
 Everything indexed by Gaussian moves together: mean parameters, B_hat entries and signs,
 Adam's moments and the statistics. Rows are kept in the order: surviving old rows, clones,
 split children. New Gaussians get fresh small B_hat entries with fresh random signs (not
-copies: METHOD.md) and zero Adam moments (as 3DGS does for new points).
+copies, as in the authors' code) and zero Adam moments (as 3DGS does for new points).
 """
 
 from typing import NamedTuple

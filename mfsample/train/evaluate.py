@@ -11,6 +11,7 @@ import numpy as np
 
 from mfsample import metrics
 from mfsample import uncertainty as uncertainty_lib
+from mfsample._json import atomic_path
 from mfsample.model import mean_gaussians
 from mfsample.renderer import render
 from mfsample.renderer.budget import render_with_budget
@@ -79,9 +80,13 @@ def save_images(directory, result: EvalResult, views, num=None):
   """Writes renders, ground truth and uncertainty maps of the first `num` views as PNG.
 
   Uncertainty maps share one scale (the largest value over the written views) so that
-  views compare; the raw float maps go to `uncertainty.npy`.
+  views compare; the raw float maps go to `uncertainty.npy`. Each file is written atomically.
   """
   import imageio.v3 as iio
+
+  def write_png(name, image):
+    with atomic_path(os.path.join(directory, name)) as tmp:
+      iio.imwrite(tmp, image)
 
   os.makedirs(directory, exist_ok=True)
   num = len(views) if num is None else min(num, len(views))
@@ -91,10 +96,10 @@ def save_images(directory, result: EvalResult, views, num=None):
   names = [re.sub(r"[^\w.-]+", "_", n.removeprefix("./")).strip("_") for n in names]
   if result.uncertainty is not None:
     scale = max(float(np.max(result.uncertainty[:num])), 1e-12)
-    np.save(os.path.join(directory, "uncertainty.npy"), result.uncertainty[:num])
+    with atomic_path(os.path.join(directory, "uncertainty.npy")) as tmp:
+      np.save(tmp, result.uncertainty[:num])
   for i in range(num):
-    iio.imwrite(os.path.join(directory, f"{names[i]}_render.png"), to8(result.images[i]))
-    iio.imwrite(os.path.join(directory, f"{names[i]}_gt.png"), to8(views.images[i]))
+    write_png(f"{names[i]}_render.png", to8(result.images[i]))
+    write_png(f"{names[i]}_gt.png", to8(views.images[i]))
     if result.uncertainty is not None:
-      iio.imwrite(os.path.join(directory, f"{names[i]}_uncertainty.png"),
-                  to8(result.uncertainty[i] / scale))
+      write_png(f"{names[i]}_uncertainty.png", to8(result.uncertainty[i] / scale))

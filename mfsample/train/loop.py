@@ -4,18 +4,24 @@ The loop is thin: it picks the view and Sobol rows of each step (both functions 
 (seed, step)), calls the jitted step, grows the render budget when a step reports
 overflow (the step left the state untouched, so it is simply re-run), and runs the host
 events of 3DGS (densification, opacity reset) and checkpoints between steps.
+
+Resuming is safe: a workdir (`train_and_evaluate`) or checkpoint directory (`train`) made
+with a different config is refused, naming the fields that differ; a checkpoint that
+cannot be read is reported by path and the newest intact one is used instead.
 """
 
 import dataclasses
 import os
 import time
+import warnings
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from mfsample._json import without_fields, write_json
+from mfsample import workdir as workdir_lib
+from mfsample._json import atomic_path, without_fields, write_json
 from mfsample.model import GROUPS, SamplerSpec, group_shapes, init_model
 from mfsample.renderer.budget import BudgetExceededError, fit_budget
 from mfsample.renderer.settings import RenderSettings
@@ -24,6 +30,7 @@ from mfsample.train import checkpoint as ckpt
 from mfsample.train import data as data_lib
 from mfsample.train import densify as densify_lib
 from mfsample.train import optim
+from mfsample.train.config import validate
 from mfsample.train.step import StepConfig, TrainState, init_train_state, make_train_step
 
 
@@ -65,12 +72,23 @@ def sampler_spec(config, extent, sh_degree):
 
 # Training-config fields that change only how fast a run goes, never what it computes
 # (beyond float rounding): a resumed run or a reused result may differ in them.
-SPEED_ONLY_FIELDS = ("render.chunks_per_step",)
+SPEED_ONLY_FIELDS = ("render.chunks_per_step", "render.compositor")
 
 
 def without_speed_only_fields(train_config_dict):
   """A training config as a JSON dict, less `SPEED_ONLY_FIELDS`: what results depend on."""
   return without_fields(train_config_dict, SPEED_ONLY_FIELDS)
+
+
+# Fields a resumed run may change: the speed-only ones, the progress bar, and which
+# checkpoints are written and kept (a restored state is bit-identical whichever it is).
+RESUME_FREE_FIELDS = SPEED_ONLY_FIELDS + ("train.progress", "train.checkpoint_every",
+                                          "train.keep_checkpoints")
+
+
+def resumable_config(config):
+  """A training config as a JSON dict, less `RESUME_FREE_FIELDS` (what checkpoints record)."""
+  return without_fields(workdir_lib.config_dict(config), RESUME_FREE_FIELDS)
 
 
 def render_settings(render_config):
@@ -80,9 +98,11 @@ def render_settings(render_config):
   (chunk_size x chunks_per_step), so any `chunks_per_step` is valid with any start.
   """
   chunks_per_step = int(render_config.get("chunks_per_step", RenderSettings.chunks_per_step))
-  return RenderSettings.holding(render_config.max_intersections,
-                                tile_size=int(render_config.tile_size),
-                                chunks_per_step=chunks_per_step)
+  return RenderSettings.holding(
+      render_config.max_intersections, tile_size=int(render_config.tile_size),
+      chunks_per_step=chunks_per_step,
+      radius_sigma=float(render_config.get("radius_sigma", RenderSettings.radius_sigma)),
+      compositor=str(render_config.get("compositor", RenderSettings.compositor)))
 
 
 def make_setup(config, train_views, *, extent=None, key=None):
@@ -163,29 +183,61 @@ def _meta(config, setup, state, history, train_seconds):
           "max_intersections": int(setup.step_config.settings.max_intersections),
           "seed": setup.seed, "sobol_seed": int(config.sampler.z_seed),
           "sobol_position": int(state.step) * setup.step_config.num_samples,
-          "extent": setup.extent, "history": history, "train_seconds": train_seconds}
+          "extent": setup.extent, "history": history, "train_seconds": train_seconds,
+          "config": resumable_config(config)}
 
 
 def restore_latest(config, setup, bounds, directory):
-  """(state, setup, meta) from the newest checkpoint in `directory`, or None if none.
+  """(state, setup, meta) from the newest intact checkpoint in `directory`, or None if none.
 
   `meta` holds the training log up to that step ("history") and the wall-clock spent
-  reaching it ("train_seconds").
+  reaching it ("train_seconds"). An unreadable checkpoint (truncated, overwritten) is
+  reported with a warning naming it, and the next older one is tried; a later save replaces
+  it.
+
+  Raises:
+    mfsample.workdir.WorkdirError: the checkpoints were written by a run with another config
+      or seed (the message names the fields).
+    ckpt.CorruptCheckpointError: checkpoints exist but none can be read.
   """
   paths = ckpt.list_checkpoints(directory)
   if not paths:
     return None
-  meta = ckpt.read_meta(paths[-1])
+  unreadable = []
+  for path in reversed(paths):
+    try:
+      meta = ckpt.read_meta(path)
+      _check_checkpoint_config(config, setup, meta, path)
+      template = init_state(config, setup, bounds)
+      template = densify_lib.grow_capacity(template, meta["capacity"])
+      state, meta = ckpt.restore_checkpoint(path, template)
+    except ckpt.CorruptCheckpointError as e:
+      warnings.warn(f"{e}; trying an older checkpoint", stacklevel=2)
+      unreadable.append(str(e))
+      continue
+    # Rounded: the checkpoint's run may have composited more or fewer chunks per step.
+    settings = setup.step_config.settings.holding_budget(meta["max_intersections"])
+    setup = setup._replace(step_config=dataclasses.replace(setup.step_config,
+                                                           settings=settings))
+    return state, setup, meta
+  raise ckpt.CorruptCheckpointError(
+      f"no readable checkpoint in {directory}: {'; '.join(unreadable)}. Remove them to "
+      "train from scratch.")
+
+
+def _check_checkpoint_config(config, setup, meta, path):
+  """Refuses a checkpoint written with another seed or (where recorded) another config."""
   if meta.get("seed") != setup.seed:
-    raise ValueError(f"{paths[-1]} was written by a run with seed {meta.get('seed')}, this run "
-                     f"has seed {setup.seed}: use another checkpoint directory")
-  template = init_state(config, setup, bounds)
-  template = densify_lib.grow_capacity(template, meta["capacity"])
-  state, meta = ckpt.restore_checkpoint(paths[-1], template)
-  # Rounded: the checkpoint's run may have composited more or fewer chunks per step.
-  settings = setup.step_config.settings.holding_budget(meta["max_intersections"])
-  setup = setup._replace(step_config=dataclasses.replace(setup.step_config, settings=settings))
-  return state, setup, meta
+    raise workdir_lib.WorkdirError(
+        f"{path} was written by a run with seed {meta.get('seed')}, this run has seed "
+        f"{setup.seed}: use another checkpoint directory")
+  if "config" in meta:
+    new = resumable_config(config)
+    if meta["config"] != new:
+      raise workdir_lib.WorkdirError(
+          f"{path} was written by a run with a different config (differences: "
+          f"{', '.join(workdir_lib.differences(meta['config'], new))}): use another "
+          "checkpoint directory")
 
 
 def _host_events(config, setup, state, step):
@@ -235,6 +287,7 @@ def train(config, views, key=None, *, setup=None, state=None, bounds=None,
   """
   from tqdm.auto import tqdm
 
+  validate(config)
   setup = setup or make_setup(config, views, key=key)
   if bounds is None:
     lo, hi = config.data.init_bounds
@@ -296,12 +349,33 @@ def train(config, views, key=None, *, setup=None, state=None, bounds=None,
 # ------------------------------------------------------------------------- experiment
 
 
+def check_workdir(config, workdir):
+  """Refuses `workdir` when it holds checkpoints or results of another training config.
+
+  Fields in `RESUME_FREE_FIELDS` may differ. A stale `config.json` with nothing computed
+  from it is simply replaced.
+
+  Raises:
+    mfsample.workdir.WorkdirError: naming the differing fields.
+  """
+  has_results = bool(ckpt.list_checkpoints(os.path.join(workdir, "checkpoints"))) or any(
+      os.path.exists(os.path.join(workdir, name)) for name in ("metrics.json",
+                                                               "train_log.json"))
+  workdir_lib.check_same_config(
+      config, workdir, free_fields=RESUME_FREE_FIELDS, has_results=has_results,
+      results="checkpoints or results",
+      remedy="use a new --workdir, or the config that made them")
+
+
 def train_and_evaluate(config, workdir):
   """Loads the data, trains (resuming from `workdir`), evaluates, writes everything.
 
   Writes to `workdir`: `checkpoints/`, `config.json`, `train_log.json`, `metrics.json`
   (test PSNR / SSIM / LPIPS of the mean model, iterations, wall-clock), `images/`
-  (renders, ground truth, uncertainty maps of test views) and `point_cloud.ply`.
+  (renders, ground truth, uncertainty maps of test views) and `point_cloud.ply`, each
+  atomically. Nothing is written before the config is validated
+  (`mfsample.train.config.validate`), the workdir is known to hold no results of another
+  config (`check_workdir`) and the data are loaded.
 
   Returns:
     the final `TrainState`.
@@ -309,10 +383,10 @@ def train_and_evaluate(config, workdir):
   from mfsample import export_ply, metrics
   from mfsample.train import evaluate as eval_lib
 
-  os.makedirs(workdir, exist_ok=True)
-  with open(os.path.join(workdir, "config.json"), "w") as f:
-    f.write(config.to_json_best_effort(indent=2))
+  validate(config)
+  check_workdir(config, workdir)
   dataset = data_lib.load_dataset(config.data)
+  workdir_lib.write_config(config, workdir)
   result = train(config, dataset.train, bounds=dataset.bounds,
                  checkpoint_dir=os.path.join(workdir, "checkpoints"))
   state, setup = result.state, result.setup
@@ -336,7 +410,8 @@ def train_and_evaluate(config, workdir):
   eval_lib.save_images(os.path.join(workdir, "images"), ev, dataset.test,
                        num=config.eval.save_images)
   if config.eval.export_ply:
-    export_ply.export_ply(os.path.join(workdir, "point_cloud.ply"), model)
+    with atomic_path(os.path.join(workdir, "point_cloud.ply")) as tmp:
+      export_ply.export_ply(tmp, model)
   summary = dict(ev.metrics)
   summary.update({
       "sampler": model.spec.kind, "rank": model.spec.rank,

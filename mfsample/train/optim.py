@@ -5,7 +5,7 @@ Adam's update is per entry, so per-group learning rates are a per-leaf scale aft
 parameter tree makes densification simple and obviously aligned: whatever row operation
 is applied to the parameters is applied to `mu` and `nu` (`map_moments`).
 
-Learning rates (3DGS, Kerbl et al. 2023; B_hat: METHOD.md / the authors' code):
+Learning rates (3DGS, Kerbl et al. 2023; B_hat: the authors' code):
 centres 1.6e-4 x extent decaying exponentially to 1.6e-6 x extent over `max_steps`, SH DC
 2.5e-3, SH rest 2.5e-3 / 20, opacity 0.05, log-scale 5e-3, quaternion 1e-3; B_hat entries
 of centres 1.6e-5 x extent (constant), opacity 5e-3, log-scale 5e-4, quaternion 1e-4,

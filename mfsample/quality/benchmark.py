@@ -1,0 +1,227 @@
+"""The AUSE benchmark (the paper's Table 5): pure steps and a resumable loop.
+
+For every scene, seed and model (one per sampler of `ause.samplers`, and a deterministic
+one for the baselines), all trained on the same views of the forward-facing arc:
+
+1. train the model (`config.train`, its sampler replaced; `planning.training.train_on_views`);
+2. at every test view, render the mean (colour, coverage, expected depth), take the depth
+   error and its mask, and each method's per-pixel map (`maps`);
+3. AUSE of every map against its model's depth error (`mfsample.metrics.ause`, MAE and RMSE),
+   and, as the floor of no information, of a constant map.
+
+Each (scene, seed, model) is written as soon as it is done (`ause/<scene>-seed<s>-<model>`:
+a JSON record and the maps as .npz for the figures), so a killed run resumes without redoing
+finished models.
+"""
+
+import json
+import os
+import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from mfsample import metrics
+from mfsample import uncertainty as unc
+from mfsample._json import write_json
+from mfsample.planning import fisher, training, variance
+from mfsample.quality import arc as arc_lib
+from mfsample.quality import maps as maps_lib
+from mfsample.renderer.budget import render_with_budget
+
+SAMPLER_KINDS = ("lowrank", "diagonal", "block")
+BASELINES = ("fisher", "activenerf")
+DETERMINISTIC = "deterministic"
+
+
+def parse_sampler(flag):
+  """"kind" or "kind:k" -> (kind, k or None), kind one of `SAMPLER_KINDS`."""
+  kind, _, rank = str(flag).partition(":")
+  if kind not in SAMPLER_KINDS:
+    raise ValueError(f"sampler {flag!r}: the kind must be one of {', '.join(SAMPLER_KINDS)}")
+  if rank and (not rank.isdigit() or int(rank) < 1):
+    raise ValueError(f"sampler {flag!r}: the rank after ':' must be an integer >= 1")
+  return kind, (int(rank) if rank else None)
+
+
+def model_names(config):
+  """The models of a scene and seed: the samplers, then the baselines' deterministic one."""
+  names = list(config.ause.samplers)
+  if config.ause.baselines:
+    names.append(DETERMINISTIC)
+  return names
+
+
+def model_config(train_config, name):
+  """The training config of model `name` (a sampler flag or "deterministic"), a copy."""
+  cfg = train_config.copy_and_resolve_references()
+  with cfg.unlocked():
+    if name == DETERMINISTIC:
+      cfg.sampler.kind = DETERMINISTIC
+    else:
+      kind, rank = parse_sampler(name)
+      cfg.sampler.kind = kind
+      if rank is not None:
+        cfg.sampler.rank = rank
+  return cfg
+
+
+def unit_name(scene, seed, name):
+  """The file stem of one (scene, seed, model) in `ause/`."""
+  return f"{scene}-seed{int(seed)}-{name.replace(':', '')}"
+
+
+def method_keys(config, name):
+  """The maps a model yields: "colour" and "depth" (Ours' samplers), or the baselines."""
+  return list(config.ause.baselines) if name == DETERMINISTIC else ["colour", "depth"]
+
+
+def evaluate_model(config, name, trained, train_views, test_views, seed):
+  """Depth errors, every method's maps and their AUSE at the test views of one model.
+
+  Args:
+    config: the uncertainty-quality config.
+    name: the model's name (a sampler flag or "deterministic").
+    trained: `planning.training.Trained`.
+    train_views: `Views` it was trained on (FisherRF's H(train), ActiveNeRF's fit).
+    test_views: `Views` with alphas and depths.
+    seed: the model's seed (probe and fit randomness).
+
+  Returns:
+    (json-able record, {array name: [V, ...] numpy}: the maps, errors and masks).
+  """
+  model = trained.model
+  bg = jnp.asarray(config.data.background, jnp.float32)
+  settings = trained.settings
+  m = config.mask
+  methods = method_keys(config, name)
+  renders, errors, masks = [], [], []
+  for i in range(len(test_views)):
+    out, settings = render_with_budget(maps_lib.mean_render, settings, model,
+                                       test_views.cameras[i], bg)
+    err, mask = maps_lib.depth_error(out.depth, out.alpha, test_views.depths[i],
+                                     test_views.alphas[i], true_alpha_min=float(m.true_alpha_min),
+                                     model_alpha_min=float(m.model_alpha_min))
+    renders.append(np.asarray(out.rgb))
+    errors.append(err)
+    masks.append(mask)
+  maps, settings = _method_maps(config, name, model, settings, train_views, test_views, seed)
+
+  views = []
+  for i in range(len(test_views)):
+    entry = {"psnr": float(metrics.psnr(renders[i], test_views.images[i])),
+             "mask_fraction": float(masks[i].mean()),
+             "depth_mae": float(errors[i][masks[i]].mean()) if masks[i].any() else None,
+             "ause": {}}
+    if masks[i].any():
+      for method in methods + ["constant"]:
+        u = maps[method][i] if method != "constant" else np.zeros_like(errors[i])
+        entry["ause"][method] = {measure: metrics.ause(u, errors[i], masks[i], measure=measure)
+                                 for measure in metrics.AUSE_MEASURES}
+    views.append(entry)
+  record = {"model": name, "methods": methods, "views": views,
+            "num_live": int(model.num_live), "train_seconds": float(trained.seconds),
+            "data_loss": float(trained.loss)}
+  arrays = {"render": np.stack(renders).astype(np.float32),
+            "depth_error": np.stack(errors).astype(np.float32), "mask": np.stack(masks),
+            **{f"map_{k}": np.stack(maps[k]).astype(np.float32) for k in methods}}
+  return record, arrays
+
+
+def _method_maps(config, name, model, settings, train_views, test_views, seed):
+  """{method: [per test view [H, W] numpy]} and the render settings that sufficed."""
+  bg = jnp.asarray(config.data.background, jnp.float32)
+  out = {}
+  if name != DETERMINISTIC:
+    z = unc.uncertainty_z(model, int(config.ause.samples), int(config.ause.z_seed))
+    out = {"colour": [], "depth": []}
+    for i in range(len(test_views)):
+      res, settings = render_with_budget(maps_lib.sample_maps, settings, model,
+                                         test_views.cameras[i], z, bg)
+      out["colour"].append(np.asarray(res.colour))
+      out["depth"].append(np.asarray(res.depth))
+    return out, settings
+  key = jax.random.fold_in(jax.random.PRNGKey(int(seed)), 40)
+  if "fisher" in config.ause.baselines:
+    f = config.fisher
+    groups = tuple(g for g in f.groups if g in model.params.mean)
+    scores, settings = fisher.fisher_scores(
+        model, train_views.cameras, test_views.cameras, key, settings=settings, background=bg,
+        num_probes=1, train_probes=int(f.train_probes), reg=float(f.reg), groups=groups)
+    out["fisher"] = []
+    for i in range(len(test_views)):
+      (u, _), settings = render_with_budget(
+          fisher.fisher_pixel_variance, settings, model, test_views.cameras[i],
+          scores.h_train, jax.random.fold_in(key, i), float(f.reg), background=bg,
+          num_probes=int(f.pixel_probes), groups=groups, stats_of=lambda o: o[1])
+      out["fisher"].append(np.asarray(u))
+  if "activenerf" in config.ause.baselines:
+    a = config.activenerf
+    vmodel, _ = variance.fit_variance(
+        model, train_views, settings=settings, background=bg, steps=int(a.steps),
+        lr=float(a.lr), prior_var=float(a.prior_var), beta_min=float(a.beta_min),
+        prior_weight=float(a.prior_weight), seed=int(seed))
+    out["activenerf"] = []
+    for i in range(len(test_views)):
+      (beta2, _), settings = render_with_budget(maps_lib.activenerf_map, settings, vmodel,
+                                                test_views.cameras[i], stats_of=lambda o: o[1])
+      out["activenerf"].append(np.asarray(beta2))
+  return out, settings
+
+
+def _save_arrays(path, arrays):
+  """np.savez_compressed, atomically (a temporary file renamed)."""
+  tmp = f"{path}.tmp.npz"
+  np.savez_compressed(tmp, **arrays)
+  os.replace(tmp, path)
+
+
+def _complete(record, config):
+  """Whether a stored record holds every map the config asks of its model."""
+  return set(method_keys(config, record["model"])) <= set(record["methods"])
+
+
+def run_ause(config, workdir, bar=None):
+  """Runs (or resumes) the AUSE benchmark of `config` in `workdir/ause`.
+
+  Returns:
+    {"records": list of records (each with "scene" and "seed"), "views": {scene: (train
+    `Views`, test `Views`)}}.
+  """
+  a = config.ause
+  os.makedirs(os.path.join(workdir, "ause"), exist_ok=True)
+  train_idx, test_idx = arc_lib.split(config.data.arc.num_views)
+  records, scene_views = [], {}
+  for scene in a.scenes:
+    views, bounds = arc_lib.arc_views(config.data, scene)
+    train_views, test_views = views.subset(train_idx), views.subset(test_idx)
+    scene_views[scene] = (train_views, test_views)
+    for seed in a.seeds:
+      for name in model_names(config):
+        stem = os.path.join(workdir, "ause", unit_name(scene, seed, name))
+        record = _load(stem + ".json")
+        if record is None or not _complete(record, config) or not os.path.exists(stem + ".npz"):
+          if bar is not None:
+            bar.set_postfix_str(f"{scene}, seed {seed}, {name}")
+          t0 = time.perf_counter()
+          trained = training.train_on_views(model_config(config.train, name), train_views,
+                                            seed=int(seed), bounds=bounds,
+                                            pad_to=len(train_views))
+          record, arrays = evaluate_model(config, name, trained, train_views, test_views,
+                                          int(seed))
+          record.update(scene=scene, seed=int(seed), train_views=train_idx.tolist(),
+                        test_views=test_idx.tolist(), seconds=time.perf_counter() - t0)
+          _save_arrays(stem + ".npz", arrays)
+          write_json(stem + ".json", record, indent=1)  # last: marks the unit done
+        records.append(record)
+        if bar is not None:
+          bar.update(1)
+  return {"records": records, "views": scene_views}
+
+
+def _load(path):
+  if not os.path.exists(path):
+    return None
+  with open(path) as f:
+    return json.load(f)

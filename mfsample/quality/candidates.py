@@ -1,0 +1,161 @@
+"""Does U follow the round model's error at the candidates? Round length, M and sampler.
+
+Ours (Sel.) picks the candidate with the highest U (Eq. 10): that helps only if U ranks the
+candidates as the current model's error there does, the paper's premise. On the planning
+pool of `candidates.planning` (default: the main job's, the built-in default scene):
+
+- view sets: the farthest-point trajectory of each seed (model-free, the same for every
+  setting), cut at `candidates.views` view counts;
+- for every (round steps, sampler, M): the protocol's round model (`rounds.steps` steps,
+  re-initialised; the sampler "kind" or "kind:k"), U of every unused candidate at the
+  scoring resolution and the mean squared error of the mean render at full resolution
+  (`mfsample.planning.u_error.u_against_error`);
+- Spearman's rho of U against that error, and of both against the angle to the nearest
+  training view (coverage), over the unused candidates; the mean over seeds and view counts.
+
+Every round length, sampler and M other than the first listed is paired with the first,
+case by case (the same seed and view set, the other settings equal). Each case is written as
+it finishes (`candidates/<case>.json`), so a killed run resumes.
+"""
+
+import itertools
+import json
+import os
+import time
+
+import numpy as np
+
+from mfsample import uncertainty as unc
+from mfsample._json import write_json
+from mfsample.quality.benchmark import parse_sampler
+
+# What a row varies; `paired` pairs each with its first value, the others held equal.
+SETTINGS = ("round_steps", "sampler", "samples")
+
+
+def farthest_views(pool, planning, seed, num_views):
+  """The farthest-point strategy's first `num_views` views from the seed's initial view."""
+  from mfsample.planning import runner, strategies
+
+  cfg = planning.copy_and_resolve_references()
+  with cfg.unlocked():
+    cfg.max_views = int(num_views)
+  return runner.plan_views(strategies.make_strategy("farthest", cfg), pool, cfg, seed,
+                           runner.Trainer(cfg, pool), budgets={})
+
+
+def case_name(steps, sampler, seed, views):
+  return f"steps{int(steps)}-{sampler.replace(':', '')}-seed{int(seed)}-views{int(views)}"
+
+
+def run_candidates(config, workdir, bar=None):
+  """Runs (or resumes) the candidates part of `config` in `workdir/candidates`.
+
+  Returns:
+    {"scene", "seeds", "view_counts", "cases_per_row", "rows", "paired"}: a row per (round
+    steps, sampler, M) with the means of rho(U, error), rho(U, angle), rho(error, angle) and
+    the per-case rho(U, error) (seed-major); `paired` as in `paired_differences`.
+  """
+  from mfsample.planning import runner
+  from mfsample.planning.pool import make_pool
+  from mfsample.planning.u_error import u_against_error
+
+  c = config.candidates
+  planning = c.planning.copy_and_resolve_references()
+  with planning.unlocked():
+    planning.data.progress = bool(config.progress) and bool(planning.data.progress)
+  os.makedirs(os.path.join(workdir, "candidates"), exist_ok=True)
+  pool = make_pool(planning.data)
+  counts = [int(v) for v in c.views]
+  seeds = [int(s) for s in c.seeds]
+  samples = [int(m) for m in c.samples]
+  trajectories = {}
+  cases = {}
+  for steps, sampler in itertools.product((int(s) for s in c.steps), c.samplers):
+    kind, rank = parse_sampler(sampler)
+    cfg = planning.copy_and_resolve_references()
+    with cfg.unlocked():
+      cfg.rounds.steps = steps
+      if rank is not None:
+        cfg.round_train.sampler.rank = rank
+    trainer = runner.Trainer(cfg, pool)
+    settings = {}
+    for seed, n in itertools.product(seeds, counts):
+      path = os.path.join(workdir, "candidates", case_name(steps, sampler, seed, n) + ".json")
+      record = None
+      if os.path.exists(path):
+        with open(path) as f:
+          record = json.load(f)
+        if not {str(m) for m in samples} <= set(record["by_samples"]):
+          record = None  # an M asked for now was not measured then
+      if record is None:
+        if bar is not None:
+          bar.set_postfix_str(f"{steps} steps, {sampler}, seed {seed}, {n} views")
+        if seed not in trajectories:
+          trajectories[seed] = farthest_views(pool, planning, seed, max(counts))
+        selected = trajectories[seed][:n]
+        t0 = time.perf_counter()
+        model = trainer.round_model(kind, selected, seed)
+        train_seconds = time.perf_counter() - t0
+        by_samples = {}
+        for m in samples:
+          z = unc.uncertainty_z(model, m, int(cfg.strategy.ours.z_seed))
+          res = u_against_error(model, pool.candidates, [v.index for v in selected], z,
+                                background=pool.background, center=pool.sphere.center,
+                                score_downscale=int(cfg.strategy.ours.score_downscale),
+                                settings=settings)
+          settings = res.settings
+          by_samples[str(m)] = {"rho_u_error": res.rho_u_error,
+                                "rho_u_angle": res.rho_u_angle,
+                                "rho_error_angle": res.rho_error_angle}
+        record = {"round_steps": steps, "sampler": sampler, "seed": seed, "views": n,
+                  "indices": [v.index for v in selected], "train_seconds": train_seconds,
+                  "by_samples": by_samples}
+        write_json(path, record, indent=1)
+      cases[(steps, sampler, seed, n)] = record
+      if bar is not None:
+        bar.update(1)
+  rows = summarise(cases, c, seeds, counts, samples)
+  return {"scene": pool.name, "seeds": seeds, "view_counts": counts,
+          "cases_per_row": len(seeds) * len(counts), "rows": rows,
+          "paired": [entry for field in SETTINGS for entry in paired_differences(rows, field)]}
+
+
+def summarise(cases, c, seeds, counts, samples):
+  """A row per (round steps, sampler, M): means over the cases (seed-major)."""
+  rows = []
+  for steps, sampler in itertools.product((int(s) for s in c.steps), c.samplers):
+    records = [cases[(steps, sampler, seed, n)] for seed in seeds for n in counts]
+    for m in samples:
+      values = np.asarray([[r["by_samples"][str(m)][k] for k in
+                            ("rho_u_error", "rho_u_angle", "rho_error_angle")]
+                           for r in records])
+      rows.append({"round_steps": steps, "sampler": sampler, "samples": m,
+                   "rho_u_error": float(values[:, 0].mean()),
+                   "rho_u_angle": float(values[:, 1].mean()),
+                   "rho_error_angle": float(values[:, 2].mean()),
+                   "per_case_rho_u_error": values[:, 0].tolist(),
+                   "round_train_seconds_median": float(np.median(
+                       [r["train_seconds"] for r in records]))})
+  return rows
+
+
+def paired_differences(rows, field):
+  """rho(U, error) of each value of `field` (round length, sampler or M) minus its first
+  value in the rows, paired by case (the same seed and view set) with the other settings
+  equal: mean, standard error and the number of cases above."""
+  others = [f for f in SETTINGS if f != field]
+  first = rows[0][field]
+  base = {tuple(r[f] for f in others): np.asarray(r["per_case_rho_u_error"])
+          for r in rows if r[field] == first}
+  paired = []
+  for r in rows:
+    if r[field] == first:
+      continue
+    diff = np.asarray(r["per_case_rho_u_error"]) - base[tuple(r[f] for f in others)]
+    paired.append({**{f: r[f] for f in SETTINGS}, "minus": {field: first},
+                   "mean": float(diff.mean()),
+                   "sem": float(diff.std(ddof=1) / np.sqrt(len(diff))) if len(diff) > 1
+                   else None,
+                   "cases_above": int(np.sum(diff > 0)), "cases": len(diff)})
+  return paired

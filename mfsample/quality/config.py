@@ -1,0 +1,131 @@
+"""The uncertainty-quality experiment's config, with its defaults.
+
+Two parts, each switched on by its `enabled` field:
+
+* `ause` (the paper's Table 5): per scene a forward-facing arc of cameras captured with exact
+  depth; models trained on every other view; on the views between, the AUSE of each
+  method's per-pixel uncertainty against the depth error of its model.
+* `candidates`: how well U ranks the unused candidate views of the planning pool by the round
+  model's error there (Spearman's rho, `mfsample.planning.u_error`), over round lengths,
+  samplers and M.
+
+`default_config()` runs the AUSE part on the three built-in scenes at 64 x 64, one seed,
+sized to finish within about 20 minutes on two CPU cores. `configs/uncertainty_quality.py`
+selects variants (the candidates part, a tiny one for tests); every number is a field below.
+"""
+
+import ml_collections
+
+from mfsample.planning.config import default_config as planning_config
+from mfsample.planning.fisher import DEFAULT_GROUPS as FISHER_GROUPS
+from mfsample.train.config import default_config as training_config
+
+
+def _training():
+  """The models' training config: the planning rounds' recipe, at 64 x 64 for 1000 steps."""
+  t = training_config()
+  t.sampler.kind = "lowrank"  # Replaced per model (`ause.samplers`, "deterministic").
+  t.sampler.rank = 2
+  t.model.sh_degree = 0  # View-independent colour, as the planning rounds (short runs).
+  t.model.init_points = 2_000  # Random initial points in the scene's bounding box (no SfM).
+  t.model.max_gaussians = 8_000
+  t.train.num_steps = 1_000  # Five 64 x 64 views: 200 passes over each.
+  t.train.progress = False
+  t.train.log_every = 1_000
+  t.densify.start = 100_000  # No densification: one compilation per sampler, every scene.
+  t.densify.stop = 100_000
+  t.densify.opacity_reset_every = 100_000
+  t.data.background = (1.0, 1.0, 1.0)  # The captures are composited on white.
+  t.data.extent = 3.3  # The planning configs' scale for the same scenes (bounding radius 1).
+  # lambda of the volume term: the planning rounds' value for short runs without
+  # densification (there, U is then low near the training views and high away from them).
+  t.loss.volume_weight = 1e-4
+  t.loss.volume_stop_before_end = 50  # The authors' last 5% (100 of 2000 steps).
+  t.render.max_intersections = 1 << 14  # Initial budget (grown on overflow).
+  t.eval.lpips_net = ""
+  return t
+
+
+def default_config():
+  """The uncertainty-quality `ml_collections.ConfigDict` (see the comment on each field)."""
+  config = ml_collections.ConfigDict()
+  config.progress = True  # tqdm progress bars.
+
+  # ----------------------------------------------------------------- part 1: AUSE
+  config.ause = a = ml_collections.ConfigDict()
+  a.enabled = True  # Run the AUSE benchmark.
+  a.scenes = ("tabletop", "still_life", "fence")  # mfsample.scenes names (data.kind "scene").
+  a.seeds = (0,)  # Model seeds (initial points, B_hat signs, view order); one run each.
+  # Samplers of the stochastic models, "kind" or "kind:k" (rank of lowrank and block): Ours
+  # with rank 1, 2 (the paper's), 4, 10, and the paper's ablation covariances.
+  a.samplers = ("lowrank:1", "lowrank:2", "lowrank:4", "lowrank:10", "diagonal", "block:2")
+  # Baselines on a deterministic model: FisherRF's per-pixel uncertainty
+  # (`planning.fisher.fisher_pixel_variance`) and ActiveNeRF's rendered variance
+  # (`planning.variance.rendered_variance`). () trains no deterministic model.
+  a.baselines = ("fisher", "activenerf")
+  a.samples = 8  # M, samples of the stochastic maps (colour U and depth variance).
+  a.z_seed = 6174  # Sobol scrambling seed of the low-rank samples (authors' code: 6174).
+
+  # ----------------------------------------------------------------- data
+  config.data = data = ml_collections.ConfigDict()
+  data.kind = "scene"  # "scene" (Mitsuba captures, exact depth) or "synthetic" (tests).
+  data.width = 64  # Image width in pixels.
+  data.height = 64  # Image height in pixels.
+  data.spp = 36  # Mitsuba samples per pixel (mfsample.scenes.DEFAULT_SPP).
+  data.cache_dir = ""  # Capture cache ("": $MFSAMPLE_CACHE or ~/.cache/mfsample/captures).
+  data.background = (1.0, 1.0, 1.0)  # Behind the scene, in the images and the models.
+  data.progress = True  # Progress bars of the captures.
+  # The forward-facing arc: num_views cameras at one height, looking at `target`, spread
+  # evenly over `span_deg` of azimuth around `azimuth_deg`. Views 0, 2, ... (the 1st, 3rd,
+  # ..., as in the light-field protocol) train the models; the views between them test.
+  data.arc = arc = ml_collections.ConfigDict()
+  arc.num_views = 9  # An odd number >= 3: (num_views + 1) / 2 train, the rest test.
+  arc.azimuth_deg = -90.0  # Centre of the arc: from -y, looking towards +y.
+  arc.span_deg = 80.0  # Azimuth from the first to the last camera.
+  arc.polar_deg = 60.0  # Angle from +z (30 degrees above the table).
+  arc.distance = 2.2  # From `target`: the table fills the frame.
+  arc.target = (0.0, 0.0, -0.2)  # The centre of the table top (the scenes' TABLE = -0.3).
+  arc.fov_deg = 40.0  # Horizontal field of view.
+  # data.kind "synthetic": random ground-truth Gaussians rendered by mfsample (no Mitsuba).
+  data.synthetic = syn = ml_collections.ConfigDict()
+  syn.num_gaussians = 150  # Ground-truth Gaussians.
+  syn.seed = 0  # Their seed.
+  syn.radius = 0.5  # Radius of their shell.
+
+  # Where the depth error counts: pixels fully covered in the ground truth (every path
+  # sample hit the scene: true alpha 1, up to float rounding) and by the model (alpha > 0.5).
+  config.mask = mask = ml_collections.ConfigDict()
+  mask.true_alpha_min = 0.999999  # Ground-truth coverage at least this.
+  mask.model_alpha_min = 0.5  # The model's alpha above this.
+
+  config.train = _training()  # The models (`mfsample.train` config); sampler set per model.
+
+  config.fisher = fisher = ml_collections.ConfigDict()  # FisherRF (planning.fisher).
+  fisher.train_probes = 32  # Rademacher probes per training view for H(train) (a denominator).
+  fisher.pixel_probes = 64  # Parameter probes per test view: relative noise <= sqrt(2 / 64).
+  fisher.reg = 1e-6  # lambda of 1 / (H(train) + lambda) (FisherRF).
+  fisher.groups = FISHER_GROUPS  # Parameter groups (FisherRF leaves out rotations).
+  config.activenerf = an = ml_collections.ConfigDict()  # ActiveNeRF (planning.variance).
+  an.steps = 200  # Adam steps of the per-Gaussian log-variance fit (one view each).
+  an.lr = 0.05  # Its learning rate.
+  an.prior_var = 0.05  # Variance of Gaussians no view constrains.
+  an.beta_min = 1e-3  # Variance floor of every pixel.
+  an.prior_weight = 1e-3  # Weight of the quadratic prior on the log-variance.
+
+  config.figures = fig = ml_collections.ConfigDict()
+  fig.enabled = True  # Write uncertainty_quality_<scene>.png per scene.
+  fig.test_view = 1  # Which test view the figure shows (0-based among the test views).
+
+  # ----------------------------------------------------------------- part 2: candidates
+  # U against the round model's error over the unused candidates of the planning pool
+  # (`planning.u_error`): view sets of the farthest-point strategy cut at `views`; for every
+  # round length, sampler and M, Spearman's rho; each setting paired with the first listed.
+  config.candidates = c = ml_collections.ConfigDict()
+  c.enabled = False  # Run this part (variant "candidates").
+  c.planning = planning_config()  # The pool, round models and scoring (the main job's).
+  c.steps = (150, 400, 600)  # Round lengths (planning rounds.steps).
+  c.samplers = ("lowrank:2",)  # Round-model samplers, "kind" or "kind:k".
+  c.samples = (2, 8)  # M of U.
+  c.seeds = (0, 1)  # Seeds (initial view, model initialisation).
+  c.views = (1, 3, 6, 9)  # Training-view counts (cuts of each seed's trajectory).
+  return config

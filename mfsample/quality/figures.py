@@ -1,0 +1,107 @@
+"""The AUSE benchmark's figure: per scene, one test view, each model's error and maps.
+
+Rows: the ground truth (image, exact depth), then one row per model: its mean render, its
+depth error (grey where it does not count) and its maps (Ours: colour U and depth variance;
+the deterministic model: FisherRF and ActiveNeRF). A map is shown by its rank among the
+counted pixels (0 = least, 1 = most uncertain), since AUSE sees only the order; the panel
+title gives its AUSE on this view. The PNG is stored with a 256-colour palette (Pillow, which
+matplotlib depends on): a third of the size, for the docs.
+"""
+
+import io
+import os
+
+import numpy as np
+
+from mfsample.quality.tables import BASELINE_LABELS, MAP_LABELS, model_label
+
+
+def _plt():
+  import matplotlib
+  matplotlib.use("Agg")
+  import matplotlib.pyplot as plt
+  return plt
+
+
+def _ranks(values, mask):
+  """Values -> their rank in [0, 1] among the masked pixels (nan elsewhere)."""
+  out = np.full(values.shape, np.nan)
+  v = values[mask]
+  if v.size:
+    order = np.argsort(np.argsort(v, kind="stable"), kind="stable")
+    out[mask] = order / max(v.size - 1, 1)
+  return out
+
+
+def scene_figure(scene, test_views, records, workdir, path, view=0, seed=None):
+  """Writes the figure of `scene` (test view `view`, the first seed's models) to `path`.
+
+  Args:
+    scene: scene name.
+    test_views: `Views` of the test cameras (images, depths).
+    records: the benchmark's records (the models of this scene are used).
+    workdir: where `ause/<unit>.npz` hold the maps.
+    path: PNG to write.
+    view: index among the test views.
+    seed: which seed's models (default: the first found).
+  """
+  from mfsample.quality.benchmark import unit_name
+
+  plt = _plt()
+  mine = [r for r in records if r["scene"] == scene]
+  if seed is None and mine:
+    seed = mine[0]["seed"]
+  mine = [r for r in mine if r["seed"] == seed]
+  if not mine:
+    return None
+  rows = len(mine) + 1
+  fig, axes = plt.subplots(rows, 4, figsize=(5.6, 1.45 * rows), squeeze=False)
+  for ax in axes.ravel():
+    ax.set_xticks([])
+    ax.set_yticks([])
+    for spine in ax.spines.values():
+      spine.set_visible(False)
+  cmap = plt.get_cmap("viridis").copy()
+  cmap.set_bad("0.75")
+  err_cmap = plt.get_cmap("magma").copy()
+  err_cmap.set_bad("0.75")
+  true_depth = np.where(test_views.alphas[view] > 0, test_views.depths[view], np.nan)
+  axes[0, 0].imshow(test_views.images[view], interpolation="nearest")
+  axes[0, 0].set_title("test view", fontsize=7)
+  axes[0, 1].imshow(true_depth, cmap="magma", interpolation="nearest")
+  axes[0, 1].set_title("exact depth", fontsize=7)
+  err_max = 0.0
+  loaded = []
+  for r in mine:
+    with np.load(os.path.join(workdir, "ause", unit_name(scene, seed, r["model"]) + ".npz")) as f:
+      arrays = {k: f[k] for k in f.files}
+    loaded.append(arrays)
+    err_max = max(err_max, float(np.max(arrays["depth_error"][view][arrays["mask"][view]],
+                                        initial=0.0)))
+  for row, (r, arrays) in enumerate(zip(mine, loaded, strict=True), start=1):
+    mask = arrays["mask"][view]
+    axes[row, 0].imshow(arrays["render"][view], interpolation="nearest")
+    axes[row, 0].set_ylabel(model_label(r["model"]), fontsize=7)
+    axes[row, 1].imshow(np.where(mask, arrays["depth_error"][view], np.nan), cmap=err_cmap,
+                        vmin=0.0, vmax=err_max or 1.0, interpolation="nearest")
+    axes[row, 1].set_title(f"depth error (MAE {r['views'][view]['depth_mae'] or 0:.3f})",
+                           fontsize=7)
+    for col, method in enumerate(r["methods"][:2], start=2):
+      ause = r["views"][view]["ause"].get(method, {}).get("mae")
+      label = BASELINE_LABELS.get(method) or MAP_LABELS.get(method, method)
+      axes[row, col].imshow(_ranks(arrays[f"map_{method}"][view], mask), cmap=cmap,
+                            vmin=0.0, vmax=1.0, interpolation="nearest")
+      axes[row, col].set_title(f"{label}, AUSE {ause:.2f}" if ause is not None else label,
+                               fontsize=7)
+  fig.suptitle(f"{scene}: test view {view}; maps as ranks (grey: not counted)", fontsize=8)
+  fig.tight_layout()
+  os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
+  buffer = io.BytesIO()
+  fig.savefig(buffer, format="png", dpi=80)
+  plt.close(fig)
+  from PIL import Image
+
+  buffer.seek(0)
+  Image.open(buffer).convert("RGB").quantize(256, method=Image.Quantize.FASTOCTREE).save(
+      path, optimize=True)
+  return path

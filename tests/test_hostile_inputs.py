@@ -1,0 +1,910 @@
+"""Hostile inputs: for every public entry point, a table of bad inputs and what they give.
+
+Each row is a bad input and its expected outcome: a clear error whose message names the
+field or the file, or a defined behaviour (docs/reliability.md lists the same tables).
+Kill-and-resume and corrupt-file tests compare against uninterrupted runs. Tiny sizes
+throughout: the compiled functions are those of tests/test_train.py and the tiny planning
+config, so a full suite compiles them once.
+"""
+
+import json
+import os
+import shutil
+import struct
+import zlib
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from absl import flags
+from conftest import tiny_config
+from ml_collections import config_flags
+from PIL import Image
+from planning_testlib import random_model
+from test_train import resume_config
+
+from configs import camera_planning
+from mfsample import _json, config_checks, samplers
+from mfsample import uncertainty as unc
+from mfsample._pytree import replace
+from mfsample.camera import Camera, InvalidCameraError
+from mfsample.config_checks import ConfigError
+from mfsample.data import DatasetError, load_blender, load_llff, poses_bounds_from_cameras
+from mfsample.data._io import read_image
+from mfsample.model import GROUPS, SamplerSpec, init_model
+from mfsample.planning import runner, tables
+from mfsample.planning.config import validate as validate_planning
+from mfsample.renderer import RenderSettings, render
+from mfsample.scenes import cache
+from mfsample.testing import orbit_camera, random_gaussians
+from mfsample.train import checkpoint as ckpt
+from mfsample.train import loop
+from mfsample.train.config import validate as validate_training
+from mfsample.workdir import WorkdirError
+
+NAN = float("nan")
+
+
+def _pose():
+  """A valid [4, 4] world-to-camera (numpy float64)."""
+  return np.asarray(orbit_camera(16, 16, distance=3.0).world_to_camera, np.float64)
+
+
+def _rot_x(deg):
+  a = np.radians(deg)
+  m = np.eye(4)
+  m[1:3, 1:3] = [[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]]
+  return m
+
+
+# ====================================================================== Camera constructors
+
+W2C = _pose()
+BAD_POSES = {  # name: (world_to_camera, fx, fy, cx, cy, expected message)
+    "nan pose": (np.where(np.eye(4) > 0, NAN, W2C), 8.0, 8.0, 8.0, 8.0, "non-finite"),
+    "inf translation": (W2C + np.pad(np.full((3, 1), np.inf), ((0, 1), (3, 0))), 8.0, 8.0,
+                        8.0, 8.0, "non-finite"),
+    "scaled 1.01": (np.diag([1.01, 1.01, 1.01, 1.0]) @ W2C, 8.0, 8.0, 8.0, 8.0, "not rigid"),
+    "sheared": (W2C + np.pad([[0.0, 0.01, 0.0]], ((0, 3), (0, 1))), 8.0, 8.0, 8.0, 8.0,
+                "not rigid"),
+    "reflected": (np.diag([1.0, 1.0, -1.0, 1.0]) @ W2C, 8.0, 8.0, 8.0, 8.0, "reflection"),
+    "projective bottom row": (W2C + np.pad([[0.0, 0.0, 0.5, 0.0]], ((3, 0), (0, 0))), 8.0,
+                              8.0, 8.0, 8.0, "bottom row"),
+    "fx = 0": (W2C, 0.0, 8.0, 8.0, 8.0, r"fx = 0.0 must be > 0"),
+    "fy < 0": (W2C, 8.0, -3.0, 8.0, 8.0, r"fy = -3.0 must be > 0"),
+    "nan fx": (W2C, NAN, 8.0, 8.0, 8.0, "fx is not finite"),
+    "inf cy": (W2C, 8.0, 8.0, 8.0, np.inf, "cy is not finite"),
+}
+
+
+@pytest.mark.parametrize("name", BAD_POSES)
+def test_camera_create_refuses(name):
+  w2c, fx, fy, cx, cy, message = BAD_POSES[name]
+  with pytest.raises(InvalidCameraError, match=message):
+    Camera.create(w2c, fx, fy, cx, cy, 16, 16)
+
+
+def test_camera_errors_name_the_batch_index():
+  w2c = np.stack([W2C, W2C, np.diag([1.0, -1.0, 1.0, 1.0]) @ W2C])
+  with pytest.raises(InvalidCameraError, match=r"world_to_camera\[2\] is a reflection.*fx\[1\]"):
+    Camera.create(w2c, np.array([8.0, -1.0, 8.0]), 8.0, 8.0, 8.0, 16, 16)
+
+
+@pytest.mark.parametrize("call, error, message", [
+    (lambda: Camera.create(np.eye(3), 1, 1, 0, 0, 4, 4), ValueError, r"\[\.\.\., 4, 4\]"),
+    (lambda: Camera.create(np.stack([W2C] * 2), np.ones(3), 1, 0, 0, 4, 4), ValueError,
+     "fx of shape"),
+    (lambda: Camera.create(W2C, 1, 1, 0, 0, 0, 4), ValueError, "width must be an integer"),
+    (lambda: Camera.create(W2C, 1, 1, 0, 0, 4, 2.5), ValueError, "height must be an integer"),
+    (lambda: Camera.create(W2C, 1, 1, 0, 0, True, 4), ValueError, "width must be an integer"),
+    (lambda: Camera.look_at(np.array([NAN, 0, 1]), np.zeros(3), np.array([0, 0, 1.0]), 0.8,
+                            8, 8), InvalidCameraError, "non-finite"),
+    (lambda: Camera.look_at(np.array([3.0, 0, 1]), np.zeros(3), np.array([0, 0, 1.0]), 60.0,
+                            8, 8), ValueError, r"fov_x = 60.0 must be in \(0, pi\) radians"),
+    (lambda: Camera.look_at(np.array([3.0, 0, 1]), np.zeros(3), np.array([0, 0, 1.0]), 0.0,
+                            8, 8), ValueError, r"fov_x = 0.0 must be in \(0, pi\)"),
+    (lambda: Camera.from_blender(np.diag([2.0, 2, 2, 1]), 0.8, 8, 8), InvalidCameraError,
+     "not rigid"),
+    (lambda: Camera.from_blender(np.eye(4), "wide", 8, 8), ValueError,
+     "camera_angle_x = 'wide' must be a number"),
+])
+def test_camera_constructor_table(call, error, message):
+  with pytest.raises(error, match=message):
+    call()
+
+
+@pytest.mark.parametrize("eye, target", [
+    ((0.0, 0.0, 3.0), (0.0, 0.0, 0.0)),  # looking along up: a fallback up vector
+    ((1.0, 1.0, 1.0), (1.0, 1.0, 1.0)),  # eye == target: a fallback direction
+])
+def test_degenerate_look_at_is_a_valid_camera(eye, target):
+  cam = Camera.look_at(np.array(eye), np.array(target), np.array([0.0, 0.0, 1.0]), 0.8, 8, 8)
+  assert bool(cam.valid) and cam.problems() == []
+
+
+def test_cameras_are_checkable_not_raising_under_jit_and_vmap():
+  """Traced constructors check nothing (no error, no sync); `valid` flags the bad ones.
+  (Under grad, tests/test_camera.py differentiates through look_at.)"""
+  up = jnp.array([0.0, 0.0, 1.0])
+  cams = Camera(jnp.stack([jnp.asarray(W2C, jnp.float32)] * 3),
+                jnp.array([8.0, 0.0, 8.0]), jnp.full(3, 8.0), jnp.full(3, 8.0),
+                jnp.full(3, 8.0), 16, 16)  # the raw constructor checks shapes only
+
+  @jax.jit
+  def flags_of(eyes, cameras):
+    looked = jax.vmap(lambda e: Camera.look_at(e, jnp.zeros(3), up, 0.8, 8, 8).valid)(eyes)
+    return looked, jax.vmap(lambda c: c.valid)(cameras)
+
+  looked, given = flags_of(jnp.array([[3.0, 0.0, 1.0], [NAN, 0.0, 1.0]]), cams)
+  np.testing.assert_array_equal(looked, [True, False])
+  np.testing.assert_array_equal(given, [True, False, True])
+
+
+# ====================================================================== render's inputs
+
+SMALL = RenderSettings(max_intersections=2048, chunk_size=8, chunks_per_step=4)
+
+
+def test_render_gives_nan_images_for_invalid_cameras():
+  """Invalid cameras cannot raise under jit: their images are NaN (rgb, alpha, depth), so any
+  finiteness check catches them, and the valid cameras of the batch are unaffected."""
+  g = random_gaussians(24, sh_degree=0, seed=3, extent=0.5, scale_range=(0.1, 0.3),
+                       opacity_range=(0.5, 0.9))
+  names = ["valid", *BAD_POSES]
+  rows = [(W2C, 8.0, 8.0, 8.0, 8.0)] + [BAD_POSES[n][:5] for n in BAD_POSES]
+  cams = Camera(*(jnp.asarray(np.stack([np.asarray(r[i], np.float64) for r in rows]),
+                              jnp.float32) for i in range(5)), 16, 16)
+  out = jax.jit(jax.vmap(lambda c: render(g, c, settings=SMALL)))(cams)
+  for i, name in enumerate(names):
+    for what in ("rgb", "alpha", "depth"):
+      image = np.asarray(getattr(out, what)[i])
+      if name == "valid":
+        assert np.all(np.isfinite(image)), what
+      else:
+        assert np.all(np.isnan(image)), (name, what)
+  assert float(np.max(out.alpha[0])) > 0.1  # the valid camera sees the Gaussians
+
+
+@pytest.mark.parametrize("call, error, message", [
+    (lambda g, c: render(g, Camera.create(np.stack([W2C] * 2), 8, 8, 8, 8, 16, 16)),
+     ValueError, "one camera"),
+    (lambda g, c: render(g, W2C), TypeError, "mfsample.Camera"),
+    (lambda g, c: render(g, c, features=jnp.ones((3, 2))), ValueError, "features must have"),
+    (lambda g, c: render(replace(g, means=g.means[:, :2]), c), ValueError, "Gaussians.means"),
+    (lambda g, c: render(replace(g, sh=jnp.zeros((4, 5, 3))), c), ValueError, "SH axis"),
+    (lambda g, c: render(replace(g, mask=jnp.ones(4, jnp.int32)), c), ValueError,
+     "mask must be boolean"),
+    (lambda g, c: render(replace(g, opacities=jnp.ones(4, jnp.int32)), c), ValueError,
+     "opacities must be floating"),
+])
+def test_render_input_table(call, error, message):
+  g = random_gaussians(4, sh_degree=0, seed=0)
+  with pytest.raises(error, match=message):
+    call(g, orbit_camera(16, 16))
+
+
+# ====================================================================== init_model
+
+SPEC = SamplerSpec(kind="lowrank", rank=2, groups=GROUPS, bounds=tuple((g, 1.0) for g in GROUPS))
+SCALES = {g: 1e-3 for g in GROUPS}
+POINTS = np.random.default_rng(0).uniform(-1, 1, (5, 3))
+
+
+@pytest.mark.parametrize("changes, message", [
+    ({"points": POINTS[:, :2]}, r"points must have shape \[N >= 1, 3\]"),
+    ({"points": np.zeros((0, 3))}, r"points must have shape \[N >= 1, 3\]"),
+    ({"points": np.where(np.arange(5)[:, None] == 3, NAN, POINTS)}, r"points\[3\] is not finite"),
+    ({"capacity": 3}, "capacity 3 < number of points 5"),
+    ({"sh_degree": 4}, "sh_degree must be an integer in 0..3"),
+    ({"init_opacity": 1.0}, r"init_opacity must be in \(0, 1\)"),
+    ({"init_opacity": 0.0}, r"init_opacity must be in \(0, 1\)"),
+    ({"colors": np.ones((4, 3))}, r"colors must have shape \[N=5, 3\]"),
+    ({"colors": np.full((5, 3), np.inf)}, r"colors\[0\] is not finite"),
+    ({"init_scales": {"means": 1e-3}}, r"init_scales\['log_scales'\] must be a finite number"),
+    ({"init_scales": {**SCALES, "quats": -1.0}}, r"init_scales\['quats'\]"),
+])
+def test_init_model_table(changes, message):
+  kwargs = {"points": POINTS, "spec": SPEC, "sh_degree": 1, "init_scales": SCALES, **changes}
+  with pytest.raises(ValueError, match=message):
+    init_model(jax.random.PRNGKey(0), **kwargs)
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"kind": "gaussian"}, "sampler kind must be one of"),
+    ({"kind": "lowrank", "rank": 0}, "rank must be >= 1"),
+    ({"groups": ("means", "colour")}, "unknown stochastic groups"),
+    ({"groups": ("means",), "bounds": ()}, "no bound given"),
+])
+def test_sampler_spec_table(kwargs, message):
+  with pytest.raises(ValueError, match=message):
+    SamplerSpec(**kwargs)
+
+
+# ====================================================================== samplers, uncertainty
+
+
+@pytest.mark.parametrize("call, message", [
+    (lambda m: samplers.sobol_z(-1, 2, 0), "num must be an integer >= 0"),
+    (lambda m: samplers.sobol_z(4, 2.5, 0), "dim must be an integer"),
+    (lambda m: samplers.sobol_z(4, 30_000, 0), "exceeds the 21201 dimensions"),
+    (lambda m: samplers.sobol_z(4, 2, 0, offset=-3), "offset must be an integer >= 0"),
+    (lambda m: samplers.draw_z(m, -1, jax.random.PRNGKey(0)), "num must be an integer >= 0"),
+    (lambda m: samplers.sample(m, jnp.zeros(3)), r"z must have shape \(2,\)"),
+    (lambda m: unc.uncertainty_z(m, 0), "num_samples must be an integer >= 1"),
+    (lambda m: unc.score_cameras(m, orbit_camera(8, 8), jnp.zeros((2, 2)), settings=SMALL),
+     "batched over one axis"),
+])
+def test_sampler_and_uncertainty_table(call, message):
+  with pytest.raises(ValueError, match=message):
+    call(random_model("lowrank", num=8))
+
+
+def test_scores_of_invalid_cameras_are_nan_and_leave_the_others_alone():
+  """One invalid candidate camera gives U = NaN for itself only (never a silent 0)."""
+  model = random_model("lowrank", num=16)
+  good = np.asarray(orbit_camera(8, 8, distance=3.0).world_to_camera, np.float32)
+  cams = Camera(jnp.asarray(np.stack([good, np.diag([1.0, 1, -1, 1]).astype(np.float32) @ good,
+                                      good])),
+                jnp.full(3, 6.0), jnp.full(3, 6.0), jnp.full(3, 4.0), jnp.full(3, 4.0), 8, 8)
+  z = unc.uncertainty_z(model, 2)
+  scores, _ = unc.score_cameras(model, cams, z, settings=SMALL, num_devices=1)
+  values = np.asarray(scores.values)
+  assert np.isnan(values[1]) and np.all(np.isfinite(values[[0, 2]]))
+  assert values[0] == values[2] and values[0] > 0
+
+
+def test_one_sample_is_allowed_and_gives_zero_uncertainty():
+  z = unc.uncertainty_z(random_model("lowrank", num=16), 1)
+  assert z.shape == (1, 2)
+  rgbs = jnp.asarray(np.random.default_rng(0).uniform(size=(1, 4, 5, 3)), jnp.float32)
+  assert not np.any(np.asarray(unc.pixel_variance(rgbs)))  # Eq. 10 with M = 1: exactly 0
+
+
+# ====================================================================== training configs
+
+TRAINING_BAD = [  # (field, value, message fragment)
+    ("seed", -1, r"config.seed = -1: must be an integer in \[0, 2147483647\]"),
+    ("data.kind", "colmapp", "config.data.kind = 'colmapp': must be one of"),
+    ("data.downscale", 0, "config.data.downscale = 0: must be an integer >= 1"),
+    ("data.background", (1.0, 1.0), "config.data.background = .*: must be 3 finite numbers"),
+    ("data.background", (1.0, NAN, 1.0), "must be 3 finite numbers in"),
+    ("data.init_bounds", (1.3, -1.3), "strictly increasing"),
+    ("data.extent", 0.0, "config.data.extent = 0.0: must be a finite number > 0.0"),
+    ("data.synthetic.sh_degree", 4, r"must be an integer in \[0, 3\]"),
+    ("model.sh_degree", 5, r"config.model.sh_degree = 5: must be an integer in \[0, 3\]"),
+    ("model.init_points", 0, "config.model.init_points = 0: must be an integer >= 1"),
+    ("model.init_opacity", 1.0, "config.model.init_opacity = 1.0: must be a finite number"),
+    ("sampler.kind", "gauss", "config.sampler.kind = 'gauss'"),
+    ("sampler.rank", 0, "config.sampler.rank = 0: must be an integer >= 1"),
+    ("sampler.groups", ("means", "means"), "repeats 'means'"),
+    ("sampler.groups", ("means", "colour"), "'colour' is not one of"),
+    ("sampler.num_samples", 0, "config.sampler.num_samples = 0"),
+    ("sampler.z", "halton", "config.sampler.z = 'halton'"),
+    ("sampler.bounds.means", 0.0, "config.sampler.bounds.means = 0.0"),
+    ("sampler.lr.quats", -1e-4, "config.sampler.lr.quats = -0.0001"),
+    ("loss.ssim_weight", 1.5, r"config.loss.ssim_weight = 1.5: must be a finite number in \[0"),
+    ("loss.volume_every", 0, "config.loss.volume_every = 0"),
+    ("optim.position_lr_final", 0.0, "config.optim.position_lr_final = 0.0"),
+    ("densify.every", 0, "config.densify.every = 0: must be an integer >= 1"),
+    ("densify.opacity_reset_every", 0, "config.densify.opacity_reset_every = 0"),
+    ("densify.min_opacity", 1.0, "config.densify.min_opacity = 1.0"),
+    ("render.max_intersections", 0, "config.render.max_intersections = 0"),
+    ("render.max_budget", 1024, "config.render.max_intersections = 4096 must be <= "
+                                "config.render.max_budget = 1024"),
+    ("render.tile_size", 0, "config.render.tile_size = 0"),
+    ("render.chunks_per_step", 0, "config.render.chunks_per_step = 0"),
+    ("train.num_steps", 0, "config.train.num_steps = 0: must be an integer >= 1"),
+    ("train.checkpoint_every", 0, "config.train.checkpoint_every = 0: must be an integer >= 1"),
+    ("train.keep_checkpoints", -1, "config.train.keep_checkpoints = -1: must be an integer"),
+    ("train.keep_checkpoints", 0, "config.train.keep_checkpoints = 0"),
+    ("train.log_every", 0, "config.train.log_every = 0"),
+    ("train.num_steps", None, "config.train.num_steps = None: must be an integer"),
+    ("train.progress", None, "config.train.progress = None: must be True or False"),
+    ("eval.lpips_net", "vgg", "config.eval.lpips_net = 'vgg'"),
+    ("eval.uncertainty_samples", 1, "config.eval.uncertainty_samples = 1: must be 0"),
+    ("eval.save_images", -1, "config.eval.save_images = -1"),
+]
+
+
+@pytest.mark.parametrize("field, value, message", TRAINING_BAD)
+def test_training_config_table(field, value, message):
+  config = tiny_config("lowrank")
+  *parents, leaf = field.split(".")
+  node = config
+  for p in parents:
+    node = node[p]
+  with config.unlocked():
+    node[leaf] = value
+  with pytest.raises(ConfigError, match=message):
+    validate_training(config)
+
+
+@pytest.mark.parametrize("field, value", [("train.num_steps", 10.5), ("train.progress", "yes"),
+                                          ("sampler.rank", "2")])
+def test_config_dicts_refuse_another_type_on_assignment(field, value):
+  config = tiny_config("lowrank")  # (and so does the command line: --config.train.num_steps)
+  with pytest.raises(TypeError, match=f"Could not override field '{field.split('.')[-1]}'"):
+    _set(config, field, value)
+
+
+def test_train_refuses_a_bad_config_before_any_step(tiny_dataset, tmp_path):
+  # Not a ZeroDivisionError after the first step, nor every checkpoint deleted as written.
+  for field, value in (("checkpoint_every", 0), ("keep_checkpoints", -1)):
+    config = tiny_config("lowrank", **{f"train.{field}": value})
+    with pytest.raises(ConfigError, match=f"config.train.{field}"):
+      loop.train(config, tiny_dataset.train, checkpoint_dir=str(tmp_path / "c"))
+  assert not (tmp_path / "c").exists()
+  for keep in (0, -1, True, 1.5):
+    with pytest.raises(ValueError, match="keep = .*: must be an integer >= 1"):
+      ckpt.save_checkpoint(str(tmp_path / "c"), {"a": jnp.zeros(2)}, {"step": 1}, keep=keep)
+
+
+# ====================================================================== train_and_evaluate
+
+
+def _write_workdir(workdir, config_text, checkpoint=True):
+  os.makedirs(os.path.join(workdir, "checkpoints"), exist_ok=True)
+  with open(os.path.join(workdir, "config.json"), "w") as f:
+    f.write(config_text)
+  if checkpoint:
+    with open(os.path.join(workdir, "checkpoints", "ckpt_00000008.npz"), "wb") as f:
+      f.write(b"stands for a checkpoint")
+
+
+def _tree_files(root):
+  return sorted((os.path.relpath(os.path.join(d, n), root), os.path.getmtime(os.path.join(d, n)))
+                for d, _, names in os.walk(root) for n in names)
+
+
+@pytest.mark.parametrize("case, error, message", [
+    ("different config", WorkdirError,
+     r"holds checkpoints or results made with a different config \(differences: "
+     r"loss.ssim_weight, sampler.rank\)"),
+    ("empty config.json", WorkdirError, r"config.json is unreadable"),
+    ("config.json not an object", WorkdirError, "does not hold a JSON object"),
+    ("invalid config", ConfigError, "config.train.checkpoint_every = 0"),
+    ("mistyped --config path", OSError, "Failed loading config file"),
+    ("missing dataset", FileNotFoundError, "No NeRF Synthetic scene"),
+])
+def test_train_and_evaluate_writes_nothing_for_a_bad_call(tmp_path, case, error, message):
+  """Each case leaves the workdir exactly as it was: config.json neither overwritten nor
+  emptied, no results of two configs mixed."""
+  workdir = str(tmp_path / "run")
+  config = tiny_config("lowrank")
+  stored = tiny_config("lowrank")
+  stored.loss.ssim_weight = 0.5
+  stored.sampler.rank = 3
+  text = {"different config": stored.to_json_best_effort(indent=2),
+          "empty config.json": "", "config.json not an object": "[1, 2]"}.get(
+              case, config.to_json_best_effort(indent=2))
+  _write_workdir(workdir, text)
+  if case == "invalid config":
+    config.train.checkpoint_every = 0
+  elif case == "mistyped --config path":
+    argv = ["prog", f"--config={tmp_path / 'configs' / 'trian.py'}"]
+    fv = flags.FlagValues()
+    config_flags.DEFINE_config_file("config", None, "", flag_values=fv, lock_config=True,
+                                    sys_argv=argv)
+    fv(argv)
+    config = fv.config  # absl defers the error to the first use
+  elif case == "missing dataset":
+    config.data.kind = "blender"
+    config.data.path = str(tmp_path / "nowhere")
+    shutil.rmtree(workdir)
+  before = _tree_files(tmp_path)
+  with pytest.raises(error, match=message):
+    loop.train_and_evaluate(config, workdir)
+  assert _tree_files(tmp_path) == before
+
+
+def test_the_workdir_guard_lets_speed_and_bookkeeping_fields_differ(tmp_path):
+  config = tiny_config("lowrank")
+  _write_workdir(str(tmp_path), config.to_json_best_effort(indent=2))
+  config.render.chunks_per_step = 64
+  config.train.checkpoint_every = 7
+  config.train.keep_checkpoints = 5
+  config.train.progress = True
+  loop.check_workdir(config, str(tmp_path))  # the same results, written differently
+  config.train.log_every = 3
+  with pytest.raises(WorkdirError, match=r"differences: train.log_every\)"):
+    loop.check_workdir(config, str(tmp_path))
+  # A config.json with nothing computed from it is simply replaced.
+  os.remove(tmp_path / "checkpoints" / "ckpt_00000008.npz")
+  loop.check_workdir(config, str(tmp_path))
+
+
+# ====================================================================== checkpoints
+
+
+@pytest.fixture(scope="module")
+def straight(tiny_dataset):
+  """The uninterrupted 16-step run of `resume_config` (densification, budget growth)."""
+  return loop.train(resume_config(), tiny_dataset.train, bounds=tiny_dataset.bounds)
+
+
+def _assert_same_run(a, b, stopped_at=None):
+  """Equal states, and equal logs (`train(stop_at=n)` also logs step n, which a checkpoint
+  written at n keeps)."""
+  for x, y in zip(jax.tree.leaves(a.state), jax.tree.leaves(b.state), strict=True):
+    np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
+  strip = lambda h: [{k: v for k, v in e.items() if k != "seconds"} for e in h]
+  assert strip(a.history) == [e for e in strip(b.history) if e["step"] != stopped_at
+                              or stopped_at in [f["step"] for f in a.history]]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("kill_at", [5, 8, 13])
+def test_training_killed_at_several_points_resumes_bit_identically(tiny_dataset, straight,
+                                                                   tmp_path, kill_at):
+  """Killed before the first checkpoint (5), right after one (8), after densification (13):
+  the resumed run equals the uninterrupted one, log included."""
+  config, d = resume_config(), str(tmp_path / "checkpoints")
+  loop.train(config, tiny_dataset.train, bounds=tiny_dataset.bounds, checkpoint_dir=d,
+             stop_at=kill_at)
+  saved = [os.path.basename(p) for p in ckpt.list_checkpoints(d)]
+  assert saved == ([] if kill_at < 8 else ["ckpt_00000008.npz"])
+  resumed = loop.train(config, tiny_dataset.train, bounds=tiny_dataset.bounds, checkpoint_dir=d)
+  _assert_same_run(straight, resumed, stopped_at=kill_at)
+
+
+@pytest.mark.slow
+def test_a_corrupt_latest_checkpoint_falls_back_to_the_newest_intact_one(tiny_dataset, straight,
+                                                                          tmp_path):
+  config, d = resume_config(), str(tmp_path / "checkpoints")
+  loop.train(config, tiny_dataset.train, bounds=tiny_dataset.bounds, checkpoint_dir=d)
+  latest = ckpt.list_checkpoints(d)[-1]
+  assert latest.endswith("ckpt_00000016.npz")
+  with open(latest, "r+b") as f:  # truncated, as by a full disk or an interrupted copy
+    f.truncate(os.path.getsize(latest) // 2)
+  with pytest.warns(UserWarning, match=r"ckpt_00000016.npz is unreadable \(BadZipFile"):
+    resumed = loop.train(config, tiny_dataset.train, bounds=tiny_dataset.bounds,
+                         checkpoint_dir=d)
+  _assert_same_run(straight, resumed)  # re-ran 8 -> 16 from the intact checkpoint
+  assert ckpt.read_meta(latest)["step"] == 16  # and replaced the corrupt file
+
+
+@pytest.mark.parametrize("damage, message", [
+    (lambda p: open(p, "wb").write(b"garbage"), r"unreadable \(ValueError"),  # not a zip
+    (lambda p: open(p, "r+b").truncate(100), "BadZipFile"),
+    (lambda p: np.savez(p, a=np.zeros(2)), r"KeyError.*__meta__"),
+    (lambda p: np.savez(p, __meta__=np.asarray("{not json")), "JSONDecodeError"),
+    (lambda p: np.savez(p, __meta__=np.asarray(json.dumps({"no": "step"}))), "no valid metadata"),
+])
+def test_unreadable_checkpoints_are_named(tmp_path, damage, message):
+  path = ckpt.save_checkpoint(str(tmp_path), {"a": jnp.zeros(2)}, {"step": 3})
+  damage(path)
+  with pytest.raises(ckpt.CorruptCheckpointError, match=rf"ckpt_00000003.npz.*{message}"):
+    ckpt.read_meta(path)
+
+
+def test_without_an_intact_checkpoint_resuming_is_refused(tiny_dataset, tmp_path):
+  config, d = resume_config(), tmp_path / "checkpoints"
+  d.mkdir()
+  for step in (8, 16):
+    (d / f"ckpt_{step:08d}.npz").write_bytes(b"")
+  with pytest.warns(UserWarning), pytest.raises(
+      ckpt.CorruptCheckpointError, match=r"no readable checkpoint.*ckpt_00000016.*ckpt_00000008"):
+    loop.train(config, tiny_dataset.train, bounds=tiny_dataset.bounds, checkpoint_dir=str(d))
+
+
+def test_checkpoints_of_another_config_are_refused(tiny_dataset, tmp_path):
+  config, d = resume_config(), str(tmp_path / "checkpoints")
+  setup = loop.make_setup(config, tiny_dataset.train)
+  state = loop.init_state(config, setup, tiny_dataset.bounds)
+  ckpt.save_checkpoint(d, state, loop._meta(config, setup, state, [], 0.0))
+  other = resume_config()
+  other.loss.ssim_weight = 0.5
+  with pytest.raises(WorkdirError, match=r"different config \(differences: loss.ssim_weight\)"):
+    loop.train(other, tiny_dataset.train, bounds=tiny_dataset.bounds, checkpoint_dir=d)
+  other = resume_config()
+  other.seed = 1
+  with pytest.raises(WorkdirError, match="seed 0, this run has seed 1"):
+    loop.train(other, tiny_dataset.train, bounds=tiny_dataset.bounds, checkpoint_dir=d)
+
+
+@pytest.mark.slow
+def test_training_killed_between_its_result_files_resumes(tiny_dataset, straight, tmp_path,
+                                                          monkeypatch):
+  """Killed after the last checkpoint but before metrics.json: the rerun trains nothing and
+  equals the uninterrupted run. Killed while metrics.json is being replaced: the previous
+  file stays whole and no temporary is left."""
+  from mfsample.train import evaluate as eval_lib
+
+  config, workdir = resume_config(), str(tmp_path / "run")
+  config.eval.uncertainty_samples = 0  # (test_train covers the maps: fewer compilations here)
+  config.eval.save_images = 1
+  evaluate = eval_lib.evaluate
+
+  def killed(*args, **kwargs):
+    raise KeyboardInterrupt("killed")
+
+  monkeypatch.setattr(eval_lib, "evaluate", killed)
+  with pytest.raises(KeyboardInterrupt):
+    loop.train_and_evaluate(config, workdir)
+  assert os.path.exists(os.path.join(workdir, "train_log.json"))
+  assert not os.path.exists(os.path.join(workdir, "metrics.json"))
+  monkeypatch.setattr(eval_lib, "evaluate", evaluate)
+  resumed = loop.train_and_evaluate(config, workdir)
+  for x, y in zip(jax.tree.leaves(straight.state), jax.tree.leaves(resumed), strict=True):
+    np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
+  metrics_path = os.path.join(workdir, "metrics.json")
+  metrics = open(metrics_path).read()
+  assert json.loads(metrics)["steps"] == 16
+
+  replace = os.replace
+
+  def dies_on_metrics(src, dst):
+    if dst.endswith("metrics.json"):
+      raise KeyboardInterrupt("killed")
+    return replace(src, dst)
+
+  monkeypatch.setattr(os, "replace", dies_on_metrics)
+  with pytest.raises(KeyboardInterrupt):
+    loop.train_and_evaluate(config, workdir)
+  assert open(metrics_path).read() == metrics  # the previous file, whole
+  assert not [n for n in os.listdir(workdir) if ".tmp" in n]
+
+
+# ====================================================================== planning configs
+
+PLANNING_BAD = [  # (field, value, message fragment)
+    ("seeds", (0, 1, 0), r"config.seeds = \(0, 1, 0\): repeats 0; each must appear once"),
+    ("seeds", (), "must hold at least 1 item"),
+    ("seeds", (-1,), "-1 is not an integer >= 0"),
+    ("strategies", ("random", "random"), "repeats 'random'"),
+    ("strategies", ("random", "best"), "'best' is not one of"),
+    ("eval_views", (2, 5), r"config.eval_views = \(2, 5\): every count must be <= "
+                           "config.max_views = 3"),
+    ("eval_views", (2, 2), "repeats 2"),
+    ("eval_views", (0, 3), "0 is not an integer >= 1"),
+    ("max_views", 9, "config.max_views = 9 must be <= config.data.num_candidates = 8"),
+    ("initial_view", 8, "config.initial_view = 8 must be < config.data.num_candidates = 8"),
+    ("paired_references", ("farthest", "nope"), "'nope' is not one of"),
+    ("data.kind", "colmap", "config.data.kind = 'colmap'"),
+    ("data.num_candidates", 0, "config.data.num_candidates = 0"),
+    ("data.synthetic.v_range", (0.6, 0.1), "strictly increasing"),
+    ("data.synthetic.distance", 0.4, r"config.data.synthetic.distance = 0.4: must be a finite "
+                                     r"number > 0.5"),
+    ("rounds.steps", 0, "config.rounds.steps = 0"),
+    ("rounds.warm_start", None, "config.rounds.warm_start = None: must be True or False"),
+    ("round_train.train.log_every", 0, "config.round_train.train.log_every = 0"),
+    ("final_train.train.num_steps", -5, "config.final_train.train.num_steps = -5"),
+    ("final_train.sampler.rank", 0, "config.final_train.sampler.rank = 0"),
+    ("strategy.ours.select_samples", 1, "config.strategy.ours.select_samples = 1: must be an "
+                                        "integer >= 2"),
+    ("strategy.optimize.samples", 1, "config.strategy.optimize.samples = 1"),
+    ("strategy.optimize.sampler", "gauss", "config.strategy.optimize.sampler = 'gauss'"),
+    ("strategy.fisher.groups", ("means", "means"), "repeats 'means'"),
+    ("strategy.activenerf.prior_var", 0.0, "config.strategy.activenerf.prior_var = 0.0"),
+    ("strategy.acp.resolution", 0, "config.strategy.acp.resolution = 0"),
+    ("figures.landscape_u", 0, "config.figures.landscape_u = 0"),
+]
+
+
+def _set(config, field, value):
+  *parents, leaf = field.split(".")
+  node = config
+  for p in parents:
+    node = node[p]
+  with config.unlocked():
+    node[leaf] = value
+
+
+@pytest.mark.parametrize("field, value, message", PLANNING_BAD)
+def test_planning_config_table(field, value, message):
+  config = camera_planning.get_config("tiny")
+  _set(config, field, value)
+  with pytest.raises(ConfigError, match=message):
+    validate_planning(config)
+
+
+def test_warm_start_with_densifying_rounds_is_refused_on_entry():
+  config = camera_planning.get_config("tiny")
+  config.rounds.warm_start = True
+  config.round_train.densify.start = 50
+  with pytest.raises(ConfigError, match="cannot densify: config.round_train.densify.start"):
+    validate_planning(config)
+
+
+def test_run_camera_planning_writes_nothing_for_a_bad_config(tmp_path):
+  config = camera_planning.get_config("tiny")
+  config.seeds = (0, 0)
+  with pytest.raises(ConfigError, match="repeats 0"):
+    runner.run_camera_planning(config, str(tmp_path / "run"))
+  assert not (tmp_path / "run").exists()
+
+
+def _record(strategy, seed, psnr):
+  return {"strategy": strategy, "label": strategy, "seed": seed, "seconds": 1.0,
+          "round_seconds": [0.0, 1.0], "optimisation": [],
+          "metrics": {"3": {"psnr": psnr, "ssim": 0.5, "lpips": None}}}
+
+
+def test_tables_count_a_repeated_run_once():
+  records = [_record("random", 0, 20.0), _record("random", 1, 22.0), _record("random", 0, 20.0),
+             _record("farthest", 0, 21.0), _record("farthest", 1, 21.0)]
+  summary = tables.summarise(records, (3,))
+  assert summary["random"]["3"]["psnr"]["values"] == [20.0, 22.0]
+  assert tables.seconds_summary(records)["random"]["runs"] == 2
+  paired = tables.paired_differences(records, (3,), "farthest")
+  assert paired["random"]["3"]["seeds"] == [0, 1]
+  with pytest.raises(ValueError, match="two different records of strategy 'random', seed 0"):
+    tables.summarise(records + [_record("random", 0, 25.0)], (3,))
+
+
+# ====================================================================== planning resume
+
+
+def _planning_config():
+  config = camera_planning.get_config("tiny")
+  config.strategies = ("random", "farthest")
+  config.figures.enabled = False
+  return config
+
+
+def _comparable(results):
+  """results.json less wall-clock, as JSON text (NaN scores compare equal as text)."""
+  drop = {"seconds", "round_seconds", "seconds_this_call", "run_seconds"}
+
+  def strip(x):
+    if isinstance(x, dict):
+      return {k: strip(v) for k, v in x.items() if k not in drop}
+    if isinstance(x, (list, tuple)):
+      return [strip(v) for v in x]
+    return x
+
+  return json.dumps(strip(results), sort_keys=True)
+
+
+@pytest.fixture(scope="module")
+def planned(tmp_path_factory):
+  """An uninterrupted tiny planning run (two strategies, one seed) and its workdir."""
+  workdir = tmp_path_factory.mktemp("planned")
+  return runner.run_camera_planning(_planning_config(), str(workdir)), workdir
+
+
+@pytest.mark.slow
+def test_planning_killed_during_a_run_resumes_to_the_same_results(planned, tmp_path,
+                                                                  monkeypatch):
+  reference, _ = planned
+  plan_views, calls = runner.plan_views, []
+
+  def killed_in_second_run(*args, **kwargs):
+    calls.append(args[0].name)
+    if len(calls) == 2:
+      raise KeyboardInterrupt("killed")
+    return plan_views(*args, **kwargs)
+
+  monkeypatch.setattr(runner, "plan_views", killed_in_second_run)
+  with pytest.raises(KeyboardInterrupt):
+    runner.run_camera_planning(_planning_config(), str(tmp_path))
+  assert sorted(os.listdir(tmp_path / "runs")) == ["random-seed0.json"]
+  assert not (tmp_path / "results.json").exists()
+  monkeypatch.setattr(runner, "plan_views", plan_views)
+  resumed = runner.run_camera_planning(_planning_config(), str(tmp_path))
+  assert _comparable(resumed) == _comparable(reference)
+
+
+def test_planning_killed_between_its_result_files_resumes(planned, tmp_path, monkeypatch):
+  """Runs written, results.json / table.md not (or killed while being replaced)."""
+  reference, workdir = planned
+  shutil.copytree(workdir, tmp_path / "run")
+  (tmp_path / "run" / "results.json").unlink()
+  (tmp_path / "run" / "table.md").write_text("an older table")
+  replace = os.replace
+
+  def dies_on_table(src, dst):
+    if dst.endswith("table.md"):
+      raise KeyboardInterrupt("killed")
+    return replace(src, dst)
+
+  monkeypatch.setattr(os, "replace", dies_on_table)
+  with pytest.raises(KeyboardInterrupt):
+    runner.run_camera_planning(_planning_config(), str(tmp_path / "run"))
+  monkeypatch.setattr(os, "replace", replace)
+  assert (tmp_path / "run" / "table.md").read_text() == "an older table"  # never truncated
+  assert not [n for n in os.listdir(tmp_path / "run") if ".tmp" in n]
+  resumed = runner.run_camera_planning(_planning_config(), str(tmp_path / "run"))
+  assert _comparable(resumed) == _comparable(reference)
+  assert (tmp_path / "run" / "table.md").read_text() == (workdir / "table.md").read_text()
+
+
+def test_planning_refuses_a_workdir_of_another_protocol(planned, tmp_path):
+  _, workdir = planned
+  shutil.copytree(workdir, tmp_path / "run")
+  before = _tree_files(tmp_path)
+  config = _planning_config()
+  config.final_train.train.num_steps = 13
+  with pytest.raises(WorkdirError, match=r"differences: final_train.train.num_steps\)"):
+    runner.run_camera_planning(config, str(tmp_path / "run"))
+  (tmp_path / "run" / "config.json").write_text("")  # unknown protocol: refused too
+  before = _tree_files(tmp_path)
+  with pytest.raises(WorkdirError, match="config.json is unreadable"):
+    runner.run_camera_planning(_planning_config(), str(tmp_path / "run"))
+  assert _tree_files(tmp_path) == before
+
+
+# ====================================================================== loaders
+
+
+def _png(path, array, bit_depth=16):
+  """Writes a non-palette PNG of [H, W, C] unsigned integers (any bit depth PNG allows)."""
+  h, w, c = array.shape
+  colour_type = {1: 0, 2: 4, 3: 2, 4: 6}[c]
+  dtype = ">u2" if bit_depth == 16 else ">u1"
+  raw = b"".join(b"\x00" + array[i].astype(dtype).tobytes() for i in range(h))
+
+  def chunk(tag, data):
+    return (struct.pack(">I", len(data)) + tag + data
+            + struct.pack(">I", zlib.crc32(tag + data) & 0xFFFFFFFF))
+
+  header = struct.pack(">IIBBBBB", w, h, bit_depth, colour_type, 0, 0, 0)
+  with open(path, "wb") as f:
+    f.write(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header) + chunk(b"IDAT", zlib.compress(raw))
+            + chunk(b"IEND", b""))
+
+
+@pytest.mark.parametrize("channels", [1, 2, 3, 4])
+def test_16_bit_pngs_are_read_at_full_precision(tmp_path, channels):
+  values = np.random.default_rng(channels).integers(0, 65536, (3, 5, channels), np.uint16)
+  _png(tmp_path / "x.png", values)
+  color, alpha = read_image(tmp_path / "x.png")
+  expected = values.astype(np.float32) / 65535.0
+  want_color = expected[..., :3] if channels >= 3 else np.repeat(expected[..., :1], 3, -1)
+  np.testing.assert_array_equal(color, want_color)  # not rounded to 8 bits
+  if channels in (2, 4):
+    np.testing.assert_array_equal(alpha, expected[..., -1])
+  else:
+    assert alpha is None
+
+
+def _pillow(tmp_path, name, make):
+  path = tmp_path / name
+  make().save(path)
+  return path
+
+
+@pytest.mark.parametrize("name, make, color, alpha", [
+    ("palette.png", lambda: Image.fromarray(np.array([[0, 255]], np.uint8)).convert("P"),
+     [[0.0] * 3, [1.0] * 3], None),
+    ("bilevel.png", lambda: Image.fromarray(np.array([[False, True]])), [[0.0] * 3, [1.0] * 3],
+     None),
+    ("cmyk.jpg", lambda: Image.new("CMYK", (2, 1), (0, 0, 0, 0)), [[1.0] * 3] * 2, None),
+    ("grey_alpha.png", lambda: Image.fromarray(np.array([[[51, 255], [102, 0]]], np.uint8), "LA"),
+     [[0.2] * 3, [0.4] * 3], [1.0, 0.0]),
+])
+def test_image_modes_are_decoded_not_misread(tmp_path, name, make, color, alpha):
+  c, a = read_image(_pillow(tmp_path, name, make))
+  np.testing.assert_allclose(c[0], color, atol=2 / 255)  # a CMYK file is RGB, not RGBA
+  if alpha is None:
+    assert a is None
+  else:
+    np.testing.assert_allclose(a[0], alpha, atol=1e-6)
+
+
+@pytest.mark.parametrize("content", [b"", b"not an image", b"\x89PNG\r\n\x1a\n" + b"\x00" * 30])
+def test_unreadable_images_name_the_file(tmp_path, content):
+  (tmp_path / "broken.png").write_bytes(content)
+  with pytest.raises(DatasetError, match=r"broken.png: cannot read image"):
+    read_image(tmp_path / "broken.png")
+
+
+def _blender(tmp_path, meta_changes=None, frame_changes=None):
+  """A one-frame NeRF Synthetic folder with `changes` applied to its json."""
+  (tmp_path / "train").mkdir(exist_ok=True)
+  Image.fromarray(np.zeros((4, 6, 4), np.uint8)).save(tmp_path / "train" / "r_0.png")
+  c2w = np.linalg.inv(np.diag([1.0, -1, -1, 1]) @ W2C @ np.diag([1.0, -1, -1, 1]))
+  frame = {"file_path": "./train/r_0", "transform_matrix": c2w.tolist(), **(frame_changes or {})}
+  meta = {"camera_angle_x": 0.8, "frames": [frame], **(meta_changes or {})}
+  (tmp_path / "transforms_train.json").write_text(json.dumps(meta))
+  return tmp_path
+
+
+@pytest.mark.parametrize("meta, frame, message", [
+    ({"camera_angle_x": "0.8"}, {}, r"transforms_train.json: 'camera_angle_x' must be a finite "
+                                    r"number, got '0.8'"),
+    ({"camera_angle_x": True}, {}, "'camera_angle_x' must be a finite number, got True"),
+    ({"camera_angle_x": 50.0}, {}, r"'camera_angle_x' = 50.0 is not in \(0, pi\) radians"),
+    ({}, {"camera_angle_x": [0.8]}, r"frame 0: 'camera_angle_x' must be a finite number"),
+    ({"fl_x": "500"}, {}, "'fl_x' must be a finite number, got '500'"),
+    ({"fl_x": -5.0}, {}, "focal lengths must be > 0"),
+    ({}, {"cx": None, "cy": NAN}, "frame 0: 'cy' must be a finite number, got nan"),
+    ({"w": "6"}, {}, "'w' must be an integer, got '6'"),
+    ({"w": 6.5}, {}, "'w' must be an integer, got 6.5"),
+    ({"h": 8}, {}, r"frame 0: 'h' = 8 but the image is 6x4"),
+    ({}, {"transform_matrix": [["a"] * 4] * 4}, r"frame 0: 'transform_matrix' must be a 3x4 or "
+                                                r"4x4 matrix of numbers"),
+    ({}, {"transform_matrix": [[1, 0], [0, 1, 0]]}, r"'transform_matrix' must be a 3x4 or 4x4"),
+    ({}, {"transform_matrix": (np.diag([1.0, 1, -1, 1])).tolist()}, "a reflection"),
+    ({}, {"transform_matrix": "identity"}, "'transform_matrix' must be a 3x4 or 4x4 matrix"),
+    ({}, {"file_path": 3}, "'file_path' must be a non-empty string"),
+    ({}, {"depth_file_path": 3}, "'depth_file_path' must be a non-empty string"),
+    ({"frames": {"file_path": "x"}}, {}, "missing or empty 'frames' list"),
+])
+def test_blender_json_field_table(tmp_path, meta, frame, message):
+  root = _blender(tmp_path, meta, frame)
+  with pytest.raises(DatasetError, match=message):
+    load_blender(root, "train")
+
+
+def test_blender_reads_16_bit_images_at_full_precision(tmp_path):
+  root = _blender(tmp_path)
+  values = np.random.default_rng(0).integers(0, 65536, (4, 6, 4), np.uint16)
+  values[..., 3] = 65535  # opaque: the composite is the stored colour
+  _png(root / "train" / "r_0.png", values)
+  views = load_blender(root, "train")
+  np.testing.assert_allclose(views.images[0], values[..., :3] / 65535.0, atol=1e-7)
+
+
+@pytest.mark.parametrize("array, message", [
+    (np.array([{"pose": 1}], dtype=object), "cannot read"),  # pickled objects are refused
+    (np.zeros((2, 17), np.complex64), "expected a real number array, got dtype complex64"),
+    (np.full((2, 17), "1.0"), "expected a real number array, got dtype <U3"),
+    (np.zeros((2, 16)), r"expected an array of shape \[V, 17\]"),
+])
+def test_llff_poses_file_table(tmp_path, array, message):
+  cams = Camera.create(np.stack([W2C] * 2), 8.0, 8.0, 8.0, 8.0, 16, 16)
+  np.save(tmp_path / "poses_bounds.npy", poses_bounds_from_cameras(cams, [[1.0, 5.0]] * 2))
+  (tmp_path / "images_8").mkdir()
+  np.save(tmp_path / "poses_bounds.npy", array, allow_pickle=True)
+  with pytest.raises(DatasetError, match=rf"poses_bounds.npy: .*{message}"):
+    load_llff(tmp_path)
+
+
+# ====================================================================== the capture cache
+
+
+@pytest.mark.parametrize("write, message", [
+    (lambda p: p.write_bytes(b""), "unreadable cache entry"),
+    (lambda p: p.write_bytes(b"PK\x03\x04 truncated"), "unreadable cache entry"),
+    (lambda p: np.savez(p, radiance=np.zeros((4, 4, 3))), "has no array 'alpha'"),
+    (lambda p: np.savez(p, radiance=np.zeros((4, 5, 3)), alpha=np.zeros((4, 4)),
+                        depth=np.zeros((4, 4))), r"radiance has shape \(4, 5, 3\)"),
+    (lambda p: np.savez(p, radiance=np.full((4, 4, 3), NAN), alpha=np.zeros((4, 4)),
+                        depth=np.zeros((4, 4))), "radiance has non-finite values"),
+    (lambda p: np.savez(p, radiance=np.array([None]), alpha=np.zeros((4, 4)),
+                        depth=np.zeros((4, 4))), "unreadable cache entry"),  # pickled
+])
+def test_unusable_capture_cache_entries_are_recomputed(tmp_path, write, message):
+  path = tmp_path / "rgbad-entry.npz"
+  write(path)
+  expected = {"radiance": (4, 4, 3), "alpha": (4, 4), "depth": (4, 4)}
+  with pytest.warns(UserWarning, match=rf"rgbad-entry.npz: .*{message}|{message} .*rgbad-entry"):
+    assert cache.load(path, expected) is None
+  cache.save(path, {k: np.zeros(s, np.float32) for k, s in expected.items()})
+  assert set(cache.load(path, expected)) == set(expected)  # the recomputed entry replaces it
+
+
+# ====================================================================== atomic writes, checks
+
+
+def test_a_writer_that_dies_leaves_the_previous_file_and_no_temporary(tmp_path):
+  path = tmp_path / "table.md"
+  _json.write_text(path, "complete")
+  with pytest.raises(RuntimeError), _json.atomic_open(path) as f:
+    f.write("half a ta")
+    raise RuntimeError("killed mid-write")
+  assert path.read_text() == "complete" and sorted(os.listdir(tmp_path)) == ["table.md"]
+  with _json.atomic_path(tmp_path / "figure.png") as tmp:  # keeps the extension
+    assert tmp.endswith(".png")
+    Image.new("RGB", (2, 2)).save(tmp)
+  assert sorted(os.listdir(tmp_path)) == ["figure.png", "table.md"]
+
+
+@pytest.mark.parametrize("check, value, message", [
+    (lambda c: config_checks.check_bool(c, "x"), 1, "config.x = 1: must be True or False"),
+    (lambda c: config_checks.check_str(c, "x", non_empty=True), "", "must be a non-empty string"),
+    (lambda c: config_checks.check_str(c, "x"), None, "config.x = None: must be a string"),
+    (lambda c: config_checks.check_floats(c, "x", 2), (1.0, "2"), "must be 2 finite numbers"),
+    (lambda c: config_checks.check_floats(c, "x", 2, increasing=True), (1, 1),
+     "strictly increasing"),
+    (lambda c: config_checks.check_floats(c, "x", 3, minimum=0), (1, -1, 1),
+     "must be 3 finite numbers >= 0"),
+    (lambda c: config_checks.check_int(c, "x", minimum=1), True, "must be an integer >= 1"),
+    (lambda c: config_checks.check_float(c, "x"), float("inf"), "must be a finite number"),
+    (lambda c: config_checks.check_int(c, "y"), 0, "config.y: the config has no such field"),
+])
+def test_config_check_table(check, value, message):
+  with pytest.raises(ConfigError, match=message):
+    check({"x": value})
