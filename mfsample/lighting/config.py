@@ -140,6 +140,11 @@ def default_config():
   render.max_budget = 1 << 24  # Refuse to grow beyond this (error, never truncation).
   render.tile_size = 16
   render.chunks_per_step = 16
+  # A Gaussian reaches min(radius_sigma, sqrt(2 ln(opacity / alpha_min))) standard
+  # deviations (docs/renderer.md); 3.0 reproduces the results in docs/lighting.md, which
+  # were measured with mfsample's former 3-sigma cut.
+  render.radius_sigma = 3.33
+  render.compositor = "jnp"  # "jnp" or "pallas" (the GPU kernel): speed only.
 
   # ----------------------------------------------------------------- light planning
   config.planning = planning = ml_collections.ConfigDict()

@@ -34,7 +34,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from mfsample import config_checks as cc
-from mfsample._json import without_fields, write_json
+from mfsample import workdir as workdir_lib
+from mfsample._json import write_json, write_text
 from mfsample.lighting import captures as cap
 from mfsample.lighting import evaluate as ev
 from mfsample.lighting import field, strategies, tables, training
@@ -42,14 +43,13 @@ from mfsample.lighting import lights as lights_lib
 from mfsample.lighting import optimize as opt_lib
 from mfsample.lighting import uncertainty as lu
 from mfsample.planning.poses import downscale_camera
-from mfsample.planning.workdirs import differences
 from mfsample.renderer.settings import RenderSettings
 from mfsample.uncertainty import uncertainty_z
 
 # Fields that may change between calls on one workdir: which strategies to run, how the
 # run is shown, and speed-only settings.
 RESUME_FREE_FIELDS = ("strategies", "progress", "data.progress", "figures",
-                      "render.chunks_per_step")
+                      "render.chunks_per_step", "render.compositor")
 
 
 # ------------------------------------------------------------------ config and workdir
@@ -90,26 +90,24 @@ def check_config(config):
   if config.test_lights.num_environments + config.test_lights.num_random < 1:
     raise cc.ConfigError("config.test_lights: num_environments + num_random must be >= 1")
   cc.check_float(config, "test_lights.power", above=0.0)
-
-
-def comparable_config(config_dict):
-  """A config as a JSON dict, less the fields a resumed call may change."""
-  return without_fields(config_dict, RESUME_FREE_FIELDS)
+  for f in ("render.max_intersections", "render.max_budget", "render.tile_size",
+            "render.chunks_per_step"):
+    cc.check_int(config, f, minimum=1)
+  cc.check_float(config, "render.radius_sigma", above=0.0)
+  cc.check_choice(config, "render.compositor", ("jnp", "pallas"))
 
 
 def check_resumable(config, workdir):
-  """Refuses to continue a workdir whose finished work used a different protocol."""
-  path = os.path.join(workdir, "config.json")
+  """Refuses to continue a workdir whose finished work used a different protocol.
+
+  Raises:
+    mfsample.workdir.WorkdirError: naming the differing fields.
+  """
   done = [os.path.join(workdir, d) for d in ("shared", "runs")]
-  if not os.path.exists(path) or not any(os.path.isdir(d) and os.listdir(d) for d in done):
-    return
-  with open(path) as f:
-    old = comparable_config(json.load(f))
-  new = comparable_config(json.loads(config.to_json_best_effort()))
-  if old != new:
-    raise ValueError(f"{workdir} holds work made with a different config (differences: "
-                     f"{', '.join(differences(old, new))}); use a new --workdir, or remove "
-                     f"{workdir}/shared and {workdir}/runs to redo it.")
+  workdir_lib.check_same_config(
+      config, workdir, free_fields=RESUME_FREE_FIELDS,
+      has_results=any(os.path.isdir(d) and os.listdir(d) for d in done), results="work",
+      remedy=f"use a new --workdir, or remove {workdir}/shared and {workdir}/runs to redo it")
 
 
 # ------------------------------------------------------------------ pure pieces
@@ -167,9 +165,18 @@ def light_slots(ctx: Context, used):
   return jnp.asarray(images), jnp.asarray(lights, jnp.float32)
 
 
+def _settings(config, budget):
+  """The config's rasterisation rule and compositor with a starting `budget` (it grows)."""
+  r = config.render
+  return RenderSettings.holding(budget, tile_size=int(r.tile_size),
+                                chunks_per_step=int(r.chunks_per_step),
+                                radius_sigma=float(r.radius_sigma),
+                                compositor=str(r.compositor))
+
+
 def evaluate_phase(ctx: Context, model):
   """(test metrics, predictions [K, T, H, W, 3]) of `model` (updates the eval budget)."""
-  settings = ctx.budgets.get("eval") or RenderSettings(max_intersections=1 << 14)
+  settings = ctx.budgets.get("eval") or _settings(ctx.config, 1 << 14)
   metrics, pred, ctx.budgets["eval"] = ev.evaluate_relit(
       model, ctx.test_cameras, ctx.test_lights, ctx.test_truth, ctx.test_kinds,
       settings=settings, lpips_fn=ctx.lpips_fn)
@@ -180,7 +187,7 @@ def gram_of(ctx: Context, model):
   """(Q, z) of U over the planning cameras for `model` (updates the "u" budget)."""
   p = ctx.config.planning
   z = uncertainty_z(model, int(p.samples), int(p.z_seed))
-  settings = ctx.budgets.get("u") or RenderSettings(max_intersections=1 << 13)
+  settings = ctx.budgets.get("u") or _settings(ctx.config, 1 << 13)
   gram, ctx.budgets["u"] = lu.light_gram(model, ctx.plan_cameras, z, settings=settings)
   return np.asarray(gram.q, np.float64), z
 
@@ -317,8 +324,7 @@ def run_light_planning(config, workdir):
   check_config(config)
   check_resumable(config, workdir)
   os.makedirs(os.path.join(workdir, "runs"), exist_ok=True)
-  with open(os.path.join(workdir, "config.json"), "w") as f:
-    f.write(config.to_json_best_effort(indent=2))
+  workdir_lib.write_config(config, workdir)
   t0, cpu0 = time.perf_counter(), time.process_time()
   data = cap.make_light_data(config.data, int(config.model.light_coeffs))
   capture_seconds, capture_cpu = time.perf_counter() - t0, time.process_time() - cpu0
@@ -352,8 +358,7 @@ def run_light_planning(config, workdir):
   title = (f"Active illumination planning on `{data.name}`: relit test views "
            f"({len(data.test_cameras)} cameras x {len(ctx.test_lights)} held-out lights), "
            f"seed {config.seed}.")
-  with open(os.path.join(workdir, "table.md"), "w") as f:
-    f.write(tables.report_markdown(summary, total, title))
+  write_text(os.path.join(workdir, "table.md"), tables.report_markdown(summary, total, title))
   results = {
       "scene": data.name,
       "resolution": [int(data.train_basis.shape[3]), int(data.train_basis.shape[2])],

@@ -33,11 +33,11 @@ from mfsample import samplers
 from mfsample.lighting import field
 from mfsample.model import SamplerSpec, project_spread
 from mfsample.renderer.budget import BudgetExceededError, fit_budget
-from mfsample.renderer.settings import RenderSettings
 from mfsample.train import checkpoint as ckpt
 from mfsample.train import densify as densify_lib
 from mfsample.train import losses, optim
 from mfsample.train.data import scene_extent
+from mfsample.train.loop import render_settings
 from mfsample.train.step import DensifyStats, StepConfig, StepMetrics, TrainState, init_train_state
 
 
@@ -92,8 +92,7 @@ def make_setup(config, train_cameras, total_steps):
       mean=tuple((g, float(o[g])) for g in shapes if g != "means"),
       spread=tuple((g, float(s.lr[g]) * (extent if g == "means" else 1.0)) for g in groups))
   r = config.render
-  settings = RenderSettings.holding(int(r.max_intersections), tile_size=int(r.tile_size),
-                                    chunks_per_step=int(r.chunks_per_step))
+  settings = render_settings(r)
   step_config = StepConfig(
       settings=settings, background=(0.0, 0.0, 0.0), num_samples=int(s.num_samples),
       ssim_weight=float(config.loss.ssim_weight),
