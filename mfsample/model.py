@@ -33,6 +33,11 @@ from mfsample.gaussians import Gaussians
 # Raw parameter groups in a fixed order (the order of a flattened per-Gaussian vector, e.g.
 # the diagonal sampler's z). `sh_rest` exists only when the model's SH degree is above 0.
 GROUPS = ("means", "log_scales", "quats", "opacity_logits", "sh_dc", "sh_rest")
+# The relightable field's groups (`mfsample.lighting`): per-Gaussian transfer matrices in place
+# of SH colour, split like the SH colour into the outgoing DC row and the other rows (their own
+# learning rates). Every group a model may hold, in the canonical order of a flattened vector.
+TRANSFER_GROUPS = ("transfer_dc", "transfer_rest")
+GROUP_ORDER = GROUPS + TRANSFER_GROUPS
 
 SAMPLER_KINDS = ("deterministic", "diagonal", "block", "lowrank")
 
@@ -72,9 +77,9 @@ class SamplerSpec:
       raise ValueError(f"sampler kind must be one of {SAMPLER_KINDS}, got {self.kind!r}")
     if self.kind in ("lowrank", "block") and self.rank < 1:
       raise ValueError(f"rank must be >= 1 for the {self.kind} sampler, got {self.rank}")
-    unknown = set(self.groups) - set(GROUPS)
+    unknown = set(self.groups) - set(GROUP_ORDER)
     if unknown:
-      raise ValueError(f"unknown stochastic groups {sorted(unknown)}; known: {GROUPS}")
+      raise ValueError(f"unknown stochastic groups {sorted(unknown)}; known: {GROUP_ORDER}")
     missing = set(self.groups) - {g for g, _ in self.bounds}
     if self.kind != "deterministic" and missing:
       raise ValueError(f"no bound given for stochastic groups {sorted(missing)}")
@@ -149,6 +154,11 @@ def group_shapes(sh_degree):
   if sh_degree > 0:
     shapes["sh_rest"] = ((sh_degree + 1) ** 2 - 1, 3)
   return shapes
+
+
+def model_group_shapes(model):
+  """{group: per-Gaussian trailing shape} of the groups `model` holds (any kind of model)."""
+  return {g: tuple(v.shape[1:]) for g, v in model.params.mean.items()}
 
 
 def capacity_bucket(n, minimum=256):
@@ -254,7 +264,7 @@ def init_spread(rng, num, shapes, spec, init_scales, dtype=np.float32):
   spread, signs = {}, {}
   if not spec.stochastic:
     return spread, signs
-  for g in sorted(set(spec.groups) & set(shapes), key=GROUPS.index):
+  for g in sorted(set(spec.groups) & set(shapes), key=GROUP_ORDER.index):
     shape = (num,) + tuple(shapes[g]) + spec.columns
     spread[g] = (init_scales[g] * rng.random(shape)).astype(dtype)
     signs[g] = np.where(rng.random(shape) < 0.5, 1, -1).astype(np.int8)

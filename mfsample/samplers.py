@@ -11,7 +11,7 @@ of z for M samples. The shape of z depends on the sampler (`z_shape`):
 | lowrank       | [k]            | B_hat B_hat^T, rank k (paper Eq. 7)          |
 
 C is the capacity and D the number of stochastic entries per Gaussian (groups in
-`model.GROUPS` order, each flattened). z is uniform on [-1, 1]: for the low-rank sampler a
+`model.GROUP_ORDER` order, each flattened). z is uniform on [-1, 1]: for the low-rank sampler a
 scrambled Sobol sequence (`sobol_z`, paper Sec. 4.3), for the per-Gaussian samplers
 pseudo-random uniforms (`draw_z`; Sobol sequences stop at 21201 dimensions and bring
 nothing at millions).
@@ -27,14 +27,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from mfsample.model import GROUPS, Model, activate, generator
+from mfsample.model import GROUP_ORDER, Model, activate, generator
 
 # Dimensions of scipy's Sobol direction numbers (Joe and Kuo).
 _SOBOL_MAX_DIM = 21201
 
 
 def _ordered(groups):
-  return sorted(groups, key=GROUPS.index)
+  return sorted(groups, key=GROUP_ORDER.index)
 
 
 def channels_per_gaussian(model: Model):

@@ -11,7 +11,8 @@ NOTEBOOKS = Path(__file__).resolve().parents[1] / "notebooks"
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name,expected", [("quickstart.ipynb", "optimised:")])
+@pytest.mark.parametrize("name,expected", [("quickstart.ipynb", "optimised:"),
+                                           ("lighting.ipynb", "relit test views: PSNR")])
 def test_notebook_executes(monkeypatch, name, expected):
   monkeypatch.setenv("MFSAMPLE_NOTEBOOK_TINY", "1")
   nb = nbformat.read(NOTEBOOKS / name, as_version=4)

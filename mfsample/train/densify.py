@@ -18,7 +18,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from mfsample.model import Model, Params, capacity_bucket, group_shapes, init_spread, padding_values
+from mfsample.model import (
+    Model,
+    Params,
+    capacity_bucket,
+    init_spread,
+    model_group_shapes,
+    padding_values,
+)
 from mfsample.train.optim import map_moments
 from mfsample.train.step import DensifyStats, TrainState
 
@@ -124,7 +131,7 @@ def densify_and_prune(state: TrainState, *, rng, grad_threshold, percent_dense, 
   num_new = len(parent)
   live = len(keep) + num_new
   new_capacity = max(capacity, capacity_bucket(live))
-  shapes = group_shapes(model.max_sh_degree)
+  shapes = model_group_shapes(model)
   pad_mean = padding_values(shapes, new_capacity)
   mean_out = {g: _assemble(mean[g], keep, new_mean[g], new_capacity, pad_mean[g])
               for g in mean}
@@ -205,7 +212,7 @@ def _pad_state(state, capacity):
   model = state.model
   old = model.capacity
   extra = capacity - old
-  shapes = group_shapes(model.max_sh_degree)
+  shapes = model_group_shapes(model)
   pad_mean = padding_values(shapes, extra)
   mean = {g: jnp.concatenate([v, pad_mean[g].astype(v.dtype)]) for g, v in
           model.params.mean.items()}
