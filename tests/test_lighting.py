@@ -13,6 +13,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from conftest import float64
 
 from configs import light_planning
 from mfsample import config_checks
@@ -146,7 +147,7 @@ def test_u_is_a_quadratic_form_of_the_light():
 
 
 def test_u_gradient_matches_finite_differences_in_float64():
-  with jax.enable_x64(True):
+  with float64():
     model = random_model(dtype=jnp.float64)
     cams = jax.tree.map(lambda x: jnp.asarray(x, jnp.float64), cameras())
     z = uncertainty_z(model, 2, 6174)
