@@ -38,7 +38,14 @@ from mfsample.train import densify as densify_lib
 from mfsample.train import losses, optim
 from mfsample.train.data import scene_extent
 from mfsample.train.loop import render_settings
-from mfsample.train.step import DensifyStats, StepConfig, StepMetrics, TrainState, init_train_state
+from mfsample.train.step import (
+    DensifyStats,
+    StepConfig,
+    StepMetrics,
+    TrainState,
+    init_train_state,
+    step_schedule,
+)
 
 
 class LightSetup(NamedTuple):
@@ -156,11 +163,7 @@ def relight_step(state: TrainState, images, lights, cameras, view, light, sobol_
   image = images[light, view]
   xi = lights[light]
   camera = cameras[view]
-  key = jax.random.fold_in(state.key, step)
-  z = samplers.draw_z(model, cfg.num_samples, key, sobol_rows)
-  z = jnp.where(step < cfg.stochastic_until, z, 0.0)
-  volume_on = ((step + 1) % cfg.volume_every == 0) & (step < cfg.volume_until)
-  volume_weight = jnp.where(volume_on, cfg.volume_weight, 0.0)
+  z, volume_weight = step_schedule(cfg, model, state.key, step, sobol_rows)
   offset2d = jnp.zeros((model.capacity, 2), model.params.mean["means"].dtype)
 
   def loss_fn(params, offset2d):

@@ -129,6 +129,19 @@ def _mask_rows(tree, mask):
   return jax.tree.map(f, tree)
 
 
+
+def step_schedule(cfg, model, key, step, sobol_rows):
+  """This step's samples z [M, k] and the weight of Eq. 9's volume term.
+
+  z are the step's Sobol rows (or fresh uniforms from `fold_in(key, step)`, per
+  `samplers.draw_z`), zero from `stochastic_until` on (the mean is rendered); the volume
+  term -lambda ||B_hat||_1 counts every `volume_every`-th step before `volume_until`.
+  """
+  z = samplers.draw_z(model, cfg.num_samples, jax.random.fold_in(key, step), sobol_rows)
+  z = jnp.where(step < cfg.stochastic_until, z, 0.0)
+  volume_on = ((step + 1) % cfg.volume_every == 0) & (step < cfg.volume_until)
+  return z, jnp.where(volume_on, cfg.volume_weight, 0.0)
+
 def train_step(state: TrainState, images, cameras, view, sobol_rows, *, cfg: StepConfig):
   """One optimisation step (pure; `train_step_jit` is its jitted form).
 
@@ -153,11 +166,7 @@ def train_step(state: TrainState, images, cameras, view, sobol_rows, *, cfg: Ste
     model = model.replace(sh_degree=jnp.asarray(max_degree, jnp.int32))
   image = images[view]
   camera = cameras[view]
-  key = jax.random.fold_in(state.key, step)
-  z = samplers.draw_z(model, cfg.num_samples, key, sobol_rows)
-  z = jnp.where(step < cfg.stochastic_until, z, 0.0)
-  volume_on = ((step + 1) % cfg.volume_every == 0) & (step < cfg.volume_until)
-  volume_weight = jnp.where(volume_on, cfg.volume_weight, 0.0)
+  z, volume_weight = step_schedule(cfg, model, state.key, step, sobol_rows)
   offset2d = jnp.zeros((model.capacity, 2), model.params.mean["means"].dtype)
 
   def loss_fn(params, offset2d):
