@@ -11,7 +11,7 @@ The comparison, defined once in `comparison_config()` (every field a flag, e.g.
 built-in default scene at 64 x 64 with 100 candidates):
 
 - view sets: the farthest-point trajectory of each seed, cut at a few view counts (as
-  `benchmarks/uncertainty_error.py`);
+  the candidates part of `experiments/uncertainty_quality.py`);
 - joint: the protocol's round model of Ours (rank-2 low-rank field, `rounds.steps` steps,
   re-initialised, at the rounds' resolution);
 - post-hoc: the protocol's deterministic round model on the same views with the same seed
