@@ -69,6 +69,7 @@ def test_batched_cameras_index_and_vmap():
   np.testing.assert_allclose(uv[:, 0], np.tile([10.0, 5.0], (3, 1)), atol=1e-4)
 
 
+@pytest.mark.slow
 def test_gradient_through_look_at_matches_finite_differences():
   point = jnp.array([[0.3, -0.2, 0.4]])
 

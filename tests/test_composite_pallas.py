@@ -41,6 +41,7 @@ def pallas(settings):
   return settings.replace(compositor="pallas")
 
 
+@pytest.mark.slow
 def test_matches_jnp_on_the_hard_scene():
   """Behind the camera, across the near plane, off screen, needle-thin, huge, below alpha_min,
   nearly transparent; tiles spanning several chunks; non-square image with partial tiles."""

@@ -686,6 +686,7 @@ def test_planning_killed_during_a_run_resumes_to_the_same_results(planned, tmp_p
   assert _comparable(resumed) == _comparable(reference)
 
 
+@pytest.mark.slow
 def test_planning_killed_between_its_result_files_resumes(planned, tmp_path, monkeypatch):
   """Runs written, results.json / table.md not (or killed while being replaced)."""
   reference, workdir = planned

@@ -71,6 +71,7 @@ def u_of(model, xi, cams=None, z=None):
 # ------------------------------------------------------------------ the field
 
 
+@pytest.mark.slow
 def test_radiance_is_linear_in_the_light_and_matches_the_basis_renders():
   model = random_model(out_coeffs=4)
   dirs = jnp.asarray(np.random.default_rng(1).normal(size=(model.capacity, 3)), jnp.float32)
@@ -146,6 +147,7 @@ def test_u_is_a_quadratic_form_of_the_light():
   assert np.all(np.linalg.eigvalsh(q) > -1e-9 * np.abs(q).max())  # PSD
 
 
+@pytest.mark.slow
 def test_u_gradient_matches_finite_differences_in_float64():
   with float64():
     model = random_model(dtype=jnp.float64)

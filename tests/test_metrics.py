@@ -36,6 +36,7 @@ def test_ssim_identical_is_one_and_known_constant_value():
 
 
 @pytest.mark.parametrize("block", [None, 16])
+@pytest.mark.slow
 def test_ssim_matches_dm_pix_default_filter_in_value_and_gradient(block, monkeypatch):
   # Our window filter (banded matrix products) must be dm-pix's own Gaussian, not a lookalike,
   # both as one product per axis and in blocks (long axes; forced here with small blocks).

@@ -232,6 +232,7 @@ def _inputs(pool, config, model, views=(0, 3)):
 
 
 @pytest.mark.parametrize("name", strategies.NAMES)
+@pytest.mark.slow
 def test_every_strategy_returns_a_valid_camera(name, models):
   pool = tiny_pool()
   config = tiny_config()
@@ -262,6 +263,7 @@ def test_every_strategy_returns_a_valid_camera(name, models):
 # highest-U candidate, as in the protocol (either branch). lr 0: the ascent stays at the
 # start, so every visited U is the start's (up to the pose's float round trip).
 @pytest.mark.parametrize("start,scale_lr", [("training", 1.0), ("best", 1.0), ("best", 0.0)])
+@pytest.mark.slow
 def test_opt_best_keeps_the_pose_with_the_highest_selection_u(models, start, scale_lr):
   pool = tiny_pool()
   config = tiny_config()
@@ -315,6 +317,7 @@ def test_farthest_point_picks_the_farthest_candidate():
   assert choice.index == int(np.argmax(d))
 
 
+@pytest.mark.slow
 def test_optimisation_increases_uncertainty_and_respects_the_band(models):
   pool = tiny_pool()
   model = models["stochastic"]
@@ -340,6 +343,7 @@ def test_optimisation_increases_uncertainty_and_respects_the_band(models):
   assert np.all(np.isfinite(np.asarray(se3.params))) and np.any(np.asarray(se3.params) != 0)
 
 
+@pytest.mark.slow
 def test_resampled_optimisation_draws_fresh_z_from_its_key(models):
   pool = tiny_pool()
   model = models["stochastic"]
@@ -363,6 +367,7 @@ def test_resampled_optimisation_draws_fresh_z_from_its_key(models):
 # ------------------------------------------------------------------ the protocol
 
 
+@pytest.mark.slow
 def test_protocol_runs_end_to_end_and_resumes(tmp_path):
   config = tiny_config()
   config.strategies = ("random", "ours_opt_rnd")
@@ -400,6 +405,7 @@ def test_protocol_runs_end_to_end_and_resumes(tmp_path):
     runner.run_camera_planning(config, str(tmp_path))
 
 
+@pytest.mark.slow
 def test_rounds_densify_when_their_config_asks():
   """The authors' round models: densification and lambda = 1 / views (unpadded training)."""
   config = tiny_config()
@@ -421,6 +427,7 @@ def test_rounds_densify_when_their_config_asks():
     runner.Trainer(config, pool).round_state("stochastic", selected, 0)
 
 
+@pytest.mark.slow
 def test_final_models_densify_when_their_config_asks():
   """The authors' final model: 3DGS with densification (variant densified_final)."""
   config = tiny_config()
@@ -490,6 +497,7 @@ def test_paired_differences_are_per_seed_and_count_wins():
   assert one["ours_sel"]["10"]["sem"] is None
 
 
+@pytest.mark.slow
 def test_batched_evaluation_matches_the_training_module(models):
   from mfsample.train.evaluate import evaluate
 

@@ -57,6 +57,7 @@ def pretrained(tmp_path_factory):
   return views, path, fit_spread(_config(), views, path)
 
 
+@pytest.mark.slow
 def test_fit_keeps_the_mean_and_grows_b_hat_where_no_view_looks(pretrained):
   _, path, result = pretrained
   stored = load_ply(path)
@@ -76,6 +77,7 @@ def test_fit_keeps_the_mean_and_grows_b_hat_where_no_view_looks(pretrained):
   assert all(np.all(v[n:] == 0.0) for v in spread.values())  # padding never moves
 
 
+@pytest.mark.slow
 def test_fit_resumes_exactly(pretrained, tmp_path):
   views, path, straight = pretrained
   directory = str(tmp_path / "ckpt")

@@ -3,6 +3,7 @@
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 from scipy.spatial.transform import Rotation
 
 from mfsample import RenderSettings
@@ -38,6 +39,7 @@ def test_covariance_is_r_s2_rt():
   np.testing.assert_allclose(cov, want, rtol=1e-5, atol=1e-9)
 
 
+@pytest.mark.slow
 def test_conic_inverts_the_jacobian_projected_covariance():
   """Sigma_2d = J W Sigma W^T J^T + eps I, with J from autodiff of the pinhole map."""
   g = random_gaussians(20, seed=2, extent=0.5, scale_range=(0.05, 0.2))

@@ -15,6 +15,7 @@ def _snippets(page):
 
 @pytest.mark.parametrize("page", [p for p in PAGES if _snippets(p)],
                          ids=lambda p: p.relative_to(ROOT).as_posix())
+@pytest.mark.slow
 def test_python_snippets_run(page, tmp_path, monkeypatch):
   monkeypatch.chdir(tmp_path)  # snippets that write files write them here
   namespace = {}

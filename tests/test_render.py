@@ -36,6 +36,7 @@ from mfsample.testing import orbit_camera, random_gaussians
 
 @pytest.mark.parametrize("sh_degree, settings", [(3, SMALL), (0, RenderSettings())],
                          ids=["sh3-small-chunks", "sh0-default-settings"])
+@pytest.mark.slow
 def test_tiled_matches_dense_reference(sh_degree, settings):
   gaussians, cam = hard_scene(sh_degree)
   weights = loss_weights()
@@ -50,6 +51,7 @@ def test_tiled_matches_dense_reference(sh_degree, settings):
   assert_grads_close(grads, grads_r)
 
 
+@pytest.mark.slow
 def test_image_does_not_depend_on_tile_size():
   gaussians, cam = hard_scene(3, seed=5)
   outs = [render(gaussians, cam, settings=SMALL.replace(tile_size=t)) for t in (8, 16)]
@@ -136,6 +138,7 @@ def test_3dgs_rules_on_a_stack_of_opaque_gaussians():
 # ------------------------------------------------------------------ gradients vs float64 FD
 
 
+@pytest.mark.slow
 def test_gradients_match_float64_finite_differences():
   """Directional derivatives along random directions, one parameter group at a time.
 
@@ -202,6 +205,7 @@ def test_gradient_flows_through_look_at_to_eye():
 # ------------------------------------------------------------------ extremes
 
 
+@pytest.mark.slow
 def test_finite_outputs_and_gradients_at_extremes():
   names, batch, cam = extreme_batch()
   values, grads = batched_values_and_grads(batch, cam, settings=EXTREME_SETTINGS)
@@ -212,6 +216,7 @@ def test_finite_outputs_and_gradients_at_extremes():
 
 
 @pytest.mark.parametrize("num, width, height", [(0, 8, 8), (1, 8, 8), (5, 1, 1)])
+@pytest.mark.slow
 def test_finite_for_tiny_inputs(num, width, height):
   g = random_gaussians(max(num, 1), sh_degree=0, seed=1, scale_range=(0.2, 0.5))
   g = jax.tree.map(lambda x: x[:num], g)
@@ -259,6 +264,7 @@ def test_stats_count_intersections():
 # ------------------------------------------------------------------ jit, vmap, retracing
 
 
+@pytest.mark.slow
 def test_jit_and_no_jit_agree():
   gaussians = random_gaussians(12, sh_degree=1, seed=7, scale_range=(0.1, 0.4))
   cam = orbit_camera(20, 12, distance=3.0)
@@ -284,6 +290,7 @@ def test_second_call_with_same_shapes_does_not_retrace():
   chex.clear_trace_counter()
 
 
+@pytest.mark.slow
 def test_vmap_over_cameras_and_over_gaussians():
   g = random_gaussians(30, sh_degree=1, seed=3, scale_range=(0.05, 0.3))
   cams = [orbit_camera(16, 12, azimuth=a) for a in (0.0, 1.0, 2.0)]
@@ -303,6 +310,7 @@ def test_vmap_over_cameras_and_over_gaussians():
 # ------------------------------------------------------------------ features, mask, errors
 
 
+@pytest.mark.slow
 def test_features_are_composited_like_colours():
   gaussians, cam = hard_scene(3)
   feats = jnp.asarray(np.random.default_rng(0).uniform(size=(gaussians.num_gaussians, 5)),
@@ -316,6 +324,7 @@ def test_features_are_composited_like_colours():
   assert np.all(np.isfinite(grad)) and float(jnp.abs(grad).sum()) > 0
 
 
+@pytest.mark.slow
 def test_screen_offset_moves_the_2d_centres_and_reports_footprints():
   """Training differentiates w.r.t. a zero `screen_offset` to get dL/d(2D centres)."""
   g, cam = hard_scene(0)
@@ -371,6 +380,7 @@ def test_non_finite_gaussians_are_culled_and_poison_nothing(compositor):
     assert np.any(leaf != 0.0)
 
 
+@pytest.mark.slow
 def test_masked_gaussians_change_nothing_and_get_no_gradient():
   g, cam = hard_scene(3)
   n, live = g.num_gaussians, g.num_gaussians - 5

@@ -229,6 +229,7 @@ def test_opacity_reset_and_capacity_growth(runs):
 
 
 @pytest.mark.parametrize("kind,rank", [("lowrank", 1), ("lowrank", 64)])
+@pytest.mark.slow
 def test_step_finite_at_the_extremes(tiny_dataset, kind, rank):
   """One Gaussian, B_hat at its bounds, rank 1 and 64: finite loss, gradients and state."""
   config = tiny_config(kind, **{"sampler.rank": rank, "model.init_points": 1})
@@ -261,6 +262,7 @@ def resume_config():
       "loss.volume_every": 3, "train.log_every": 5})
 
 
+@pytest.mark.slow
 def test_resumed_run_matches_an_uninterrupted_one(tiny_dataset, tmp_path):
   config = resume_config()
   straight = loop.train(config, tiny_dataset.train, bounds=tiny_dataset.bounds)
@@ -302,6 +304,7 @@ def test_resumed_run_matches_an_uninterrupted_one(tiny_dataset, tmp_path):
     assert json.load(f)["train_seconds"] == pytest.approx(metrics["train_seconds"], abs=1.0)
 
 
+@pytest.mark.slow
 def test_chunks_per_step_changes_speed_not_training(tiny_dataset, tmp_path):
   """`render.chunks_per_step` is a speed knob: runs agree to float rounding, a checkpoint
   resumes under another value, and result headers leave it out."""
@@ -325,6 +328,7 @@ def test_chunks_per_step_changes_speed_not_training(tiny_dataset, tmp_path):
       as_json(wide))
 
 
+@pytest.mark.slow
 def test_two_samples_per_step(tiny_dataset):
   """M = 2: both samples are rendered (sequentially) and the data term is their mean."""
   run = Run(tiny_config("lowrank", **{"sampler.num_samples": 2}), tiny_dataset)

@@ -33,6 +33,7 @@ def test_pixel_variance_is_the_biased_sample_variance_summed_over_rgb():
   np.testing.assert_allclose(unc.pixel_variance(jnp.asarray(rgbs)), expected, rtol=1e-5)
 
 
+@pytest.mark.slow
 def test_two_samples_give_quarter_squared_difference(model):
   # With M = 2, (1/2) sum_m ||C_m - C_mean||^2 = ||C_1 - C_2||^2 / 4 per pixel.
   z = unc.uncertainty_z(model, 2)
@@ -65,6 +66,7 @@ def test_sobol_samples_are_the_first_scrambled_points(model):
   assert np.all(np.sign(z[0]) != np.sign(z[1]))
 
 
+@pytest.mark.slow
 def test_gradient_wrt_camera_matches_finite_differences():
   # dU/d(u, v) on the camera sphere and dU/dxi of a free 6-DoF motion, against central
   # differences in float64. The step is tiny on purpose: a splatted image has measure-zero
@@ -90,6 +92,7 @@ def test_gradient_wrt_camera_matches_finite_differences():
     np.testing.assert_allclose(grad, fd, rtol=1e-4, atol=1e-6 * np.abs(fd).max())
 
 
+@pytest.mark.slow
 def test_one_training_view_opposite_view_is_more_uncertain():
   pool = tiny_pool()
   trained = trained_one_view("lowrank", view=0)
@@ -104,6 +107,7 @@ def test_one_training_view_opposite_view_is_more_uncertain():
   assert u_opposite > 1.5 * u_train > 0.0
 
 
+@pytest.mark.slow
 def test_scores_match_single_camera_calls_for_any_chunk_size(model):
   z = unc.uncertainty_z(model, 2)
   uv = np.random.default_rng(1).uniform([0.0, 0.1], [1.0, 0.5], (5, 2)).astype(np.float32)
@@ -117,6 +121,7 @@ def test_scores_match_single_camera_calls_for_any_chunk_size(model):
     np.testing.assert_allclose(np.sum(out.pixel_maps, axis=(1, 2)), single, rtol=1e-5)
 
 
+@pytest.mark.slow
 def test_scoring_grows_the_budget_instead_of_truncating(model):
   z = unc.uncertainty_z(model, 2)
   cams = poses.spherical_camera(jnp.asarray([UV, UV + 0.2]), SPHERE)
@@ -163,6 +168,7 @@ _SHARDED = textwrap.dedent("""
 """)
 
 
+@pytest.mark.slow
 def test_candidate_scoring_and_samples_shard_over_devices():
   here = os.path.dirname(__file__)
   env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=4",
