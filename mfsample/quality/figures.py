@@ -62,10 +62,8 @@ def scene_figure(scene, test_views, records, workdir, path, view=0, seed=None):
     ax.set_yticks([])
     for spine in ax.spines.values():
       spine.set_visible(False)
-  cmap = plt.get_cmap("viridis").copy()
-  cmap.set_bad("0.75")
-  err_cmap = plt.get_cmap("magma").copy()
-  err_cmap.set_bad("0.75")
+  cmap = plt.get_cmap("viridis").with_extremes(bad="0.75")  # grey: pixels not counted
+  err_cmap = plt.get_cmap("magma").with_extremes(bad="0.75")
   true_depth = np.where(test_views.alphas[view] > 0, test_views.depths[view], np.nan)
   axes[0, 0].imshow(test_views.images[view], interpolation="nearest")
   axes[0, 0].set_title("test view", fontsize=7)
