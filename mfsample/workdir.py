@@ -6,7 +6,8 @@ file and refuses, naming the differing fields, when they differ in anything but 
 the experiment declares free (speed, presentation, which runs to do). So results made with
 different configs never end up in one table, and nothing is overwritten by mistake.
 
-  check_same_config(config, workdir, free_fields=..., has_results=...)  # before any write
+  check_same_config(config, workdir, free_fields=...,
+                    has_results=holds_results(workdir, "runs"))  # before any write
   write_config(config, workdir)                                        # then record it
 """
 
@@ -63,6 +64,15 @@ def read_config(workdir):
     raise WorkdirError(f"{path} does not hold a JSON object: use a new --workdir, or restore "
                        "that file.")
   return old
+
+
+def holds_results(workdir, *names):
+  """Whether any of `names` in `workdir` is an existing file or a non-empty folder."""
+  for name in names:
+    path = os.path.join(workdir, name)
+    if os.path.isfile(path) or (os.path.isdir(path) and os.listdir(path)):
+      return True
+  return False
 
 
 def check_same_config(config, workdir, *, free_fields=(), has_results=True, results="results",

@@ -103,10 +103,9 @@ def check_resumable(config, workdir):
   Raises:
     mfsample.workdir.WorkdirError: naming the differing fields.
   """
-  done = [os.path.join(workdir, d) for d in ("shared", "runs")]
   workdir_lib.check_same_config(
       config, workdir, free_fields=RESUME_FREE_FIELDS,
-      has_results=any(os.path.isdir(d) and os.listdir(d) for d in done), results="work",
+      has_results=workdir_lib.holds_results(workdir, "shared", "runs"), results="work",
       remedy=f"use a new --workdir, or remove {workdir}/shared and {workdir}/runs to redo it")
 
 

@@ -32,12 +32,11 @@ import optax
 from mfsample import samplers
 from mfsample.lighting import field
 from mfsample.model import SamplerSpec, project_spread
-from mfsample.renderer.budget import BudgetExceededError, fit_budget
 from mfsample.train import checkpoint as ckpt
 from mfsample.train import densify as densify_lib
 from mfsample.train import losses, optim
 from mfsample.train.data import scene_extent
-from mfsample.train.loop import render_settings
+from mfsample.train.loop import render_settings, with_grown_budget
 from mfsample.train.step import (
     DensifyStats,
     StepConfig,
@@ -282,14 +281,8 @@ def train_steps(config, setup: LightSetup, state, images, lights, cameras, *, nu
     light, view = pair_for_step(setup.seed, step, phase_start, num_views, num_lights)
     new_state, metrics = step_fn(state, images, lights, cameras, jnp.int32(view),
                                  jnp.int32(light), setup.sobol[step * m:(step + 1) * m])
-    if bool(metrics.overflow):
-      settings = fit_budget(setup.step_config.settings, metrics)
-      if settings.max_intersections > int(config.render.max_budget):
-        raise BudgetExceededError(
-            f"step {step} needs {int(metrics.num_padded)} intersections, more than "
-            f"config.render.max_budget={config.render.max_budget}")
-      setup = setup._replace(step_config=dataclasses.replace(setup.step_config,
-                                                             settings=settings))
+    if bool(metrics.overflow):  # nothing was updated: grow the budget and redo the step
+      setup = with_grown_budget(setup, metrics, int(config.render.max_budget), step)
       step_fn = make_relight_step(setup.step_config, max_traces)
       continue
     state, step = new_state, step + 1

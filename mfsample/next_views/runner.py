@@ -70,11 +70,10 @@ def check_workdir(config, workdir):
   """Refuses a workdir holding work (checkpoints, results) of a different config, naming the
   differing fields. A workdir whose earlier call failed before computing anything (a wrong
   data path, say) is taken over."""
-  checkpoints = os.path.join(workdir, "checkpoints")
-  holds_work = (os.path.exists(os.path.join(workdir, "results.json"))
-                or (os.path.isdir(checkpoints) and bool(os.listdir(checkpoints))))
-  workdir_lib.check_same_config(config, workdir, free_fields=RESUME_FREE_FIELDS,
-                                has_results=holds_work, results="a run")
+  workdir_lib.check_same_config(
+      config, workdir, free_fields=RESUME_FREE_FIELDS,
+      has_results=workdir_lib.holds_results(workdir, "results.json", "checkpoints"),
+      results="a run")
 
 
 def run_uncertainty(config, workdir):

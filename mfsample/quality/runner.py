@@ -115,10 +115,9 @@ def check_resumable(config, workdir):
   Raises:
     mfsample.workdir.WorkdirError: naming the differing fields.
   """
-  units = [os.path.join(workdir, d) for d in ("ause", "candidates")]
   workdir_lib.check_same_config(
       config, workdir, free_fields=RESUME_FREE_FIELDS,
-      has_results=any(os.path.isdir(u) and os.listdir(u) for u in units),
+      has_results=workdir_lib.holds_results(workdir, "ause", "candidates"),
       remedy=f"use a new --workdir, or remove {workdir}/ause and {workdir}/candidates to "
              "redo them")
 

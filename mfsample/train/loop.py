@@ -238,6 +238,22 @@ def _check_checkpoint_config(config, setup, meta, path):
           "checkpoint directory")
 
 
+def with_grown_budget(setup, metrics, max_budget, step):
+  """`setup` whose step renders with a budget that holds the overflowing step's intersections.
+
+  Works for any setup NamedTuple with a `step_config` (colour and relightable training).
+
+  Raises:
+    BudgetExceededError: the step needs more than `max_budget` (config.render.max_budget).
+  """
+  settings = fit_budget(setup.step_config.settings, metrics)
+  if settings.max_intersections > max_budget:
+    raise BudgetExceededError(
+        f"step {step} needs {int(metrics.num_padded)} intersections, more than "
+        f"config.render.max_budget={max_budget}")
+  return setup._replace(step_config=dataclasses.replace(setup.step_config, settings=settings))
+
+
 def _host_events(config, setup, state, step):
   """Densification and opacity reset after `step` completed steps (3DGS schedule)."""
   d = config.densify
@@ -314,13 +330,7 @@ def train(config, views, key=None, *, setup=None, state=None, bounds=None,
     rows = setup.sobol[step * m:(step + 1) * m]
     new_state, metrics = step_fn(state, views.images, views.cameras, view, rows)
     if bool(metrics.overflow):  # nothing was updated: grow the budget and redo the step
-      settings = fit_budget(setup.step_config.settings, metrics)
-      if settings.max_intersections > config.render.max_budget:
-        raise BudgetExceededError(
-            f"step {step} needs {int(metrics.num_padded)} intersections, more than "
-            f"config.render.max_budget={config.render.max_budget}")
-      setup = setup._replace(step_config=dataclasses.replace(setup.step_config,
-                                                             settings=settings))
+      setup = with_grown_budget(setup, metrics, int(config.render.max_budget), step)
       step_fn = make_train_step(setup.step_config, max_traces)
       continue
     state, step = new_state, step + 1
