@@ -29,7 +29,7 @@ from mfsample.lighting import lights as lights_lib
 from mfsample.lighting import uncertainty as lu
 from mfsample.renderer.budget import BudgetExceededError
 from mfsample.renderer.settings import RenderSettings
-from mfsample.uncertainty import default_num_devices
+from mfsample.sharding import default_num_devices
 
 
 @dataclasses.dataclass(frozen=True)

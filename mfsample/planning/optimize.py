@@ -31,7 +31,8 @@ import optax
 from mfsample.planning import poses
 from mfsample.renderer.budget import render_with_budget
 from mfsample.renderer.settings import RenderSettings
-from mfsample.uncertainty import default_num_devices, sample_gaussians, uncertainty_of_samples
+from mfsample.sharding import default_num_devices
+from mfsample.uncertainty import sample_gaussians, uncertainty_of_samples
 
 
 @dataclasses.dataclass(frozen=True)

@@ -37,10 +37,11 @@ from mfsample import metrics as metrics_lib
 from mfsample import uncertainty as unc
 from mfsample import workdir as workdir_lib
 from mfsample._json import atomic_path, write_json, write_text
+from mfsample.baselines import activenerf
 from mfsample.data._io import area_downscale
 from mfsample.data.views import Views
 from mfsample.model import mean_gaussians
-from mfsample.planning import figures, poses, strategies, tables, training, variance, workdirs
+from mfsample.planning import figures, poses, strategies, tables, training, workdirs
 from mfsample.planning.config import validate
 from mfsample.planning.pool import Pool, make_pool, stack_cameras
 from mfsample.renderer import render
@@ -221,7 +222,7 @@ class Trainer:
       trained = self.round_state(base, selected, seed)
       a = self.config.strategy.activenerf
       t0 = time.perf_counter()
-      vmodel, _ = variance.fit_variance(
+      vmodel, _ = activenerf.fit_variance(
           trained.model, as_views(selected, int(self.config.rounds.downscale)),
           settings=trained.settings,
           background=self.pool.background, steps=int(a.steps), lr=float(a.lr),

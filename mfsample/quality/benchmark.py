@@ -28,7 +28,8 @@ import numpy as np
 from mfsample import metrics
 from mfsample import uncertainty as unc
 from mfsample._json import write_json
-from mfsample.planning import fisher, training, variance
+from mfsample.baselines import activenerf, fisher
+from mfsample.planning import training
 from mfsample.quality import arc as arc_lib
 from mfsample.quality import maps as maps_lib
 from mfsample.renderer.budget import render_with_budget
@@ -216,7 +217,7 @@ def _method_maps(config, name, model, settings, train_views, test_views, seed):
       out["fisher"].append(np.asarray(u))
   if "activenerf" in config.ause.baselines:
     a = config.activenerf
-    vmodel, _ = variance.fit_variance(
+    vmodel, _ = activenerf.fit_variance(
         model, train_views, settings=settings, background=bg, steps=int(a.steps),
         lr=float(a.lr), prior_var=float(a.prior_var), beta_min=float(a.beta_min),
         prior_weight=float(a.prior_weight), seed=int(seed))

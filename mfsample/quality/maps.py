@@ -8,9 +8,9 @@ For a test camera and a trained model:
 * Ours (any sampler), from M samples theta(z_m) of the field (`sample_maps`):
   colour U(p) = (1/M) sum_m ||C_m(p) - C_mean(p)||^2 (Eq. 10's per-pixel term), and the
   variance over the samples of their expected depth d_m(p), which the paper does not report;
-* FisherRF: `mfsample.planning.fisher.fisher_pixel_variance`, the per-pixel terms of its
+* FisherRF: `mfsample.baselines.fisher.fisher_pixel_variance`, the per-pixel terms of its
   candidate score, with H over the training views;
-* ActiveNeRF: the rendered variance beta^2(p) of `mfsample.planning.variance`.
+* ActiveNeRF: the rendered variance beta^2(p) of `mfsample.baselines.activenerf`.
 """
 
 import functools
@@ -21,8 +21,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from mfsample.baselines.activenerf import rendered_variance
 from mfsample.model import mean_gaussians
-from mfsample.planning.variance import rendered_variance
 from mfsample.renderer import RenderSettings, TileStats, render
 from mfsample.uncertainty import pixel_variance, sample_gaussians
 
@@ -80,7 +80,7 @@ def sample_maps(model, camera, z, background, *, settings: RenderSettings) -> Sa
 
 @functools.partial(jax.jit, static_argnames=("settings",))
 def activenerf_map(vmodel, camera, *, settings: RenderSettings):
-  """ActiveNeRF's per-pixel variance beta^2(p) of a fitted `variance.VarianceModel`, and the
+  """ActiveNeRF's per-pixel variance beta^2(p) of a fitted `activenerf.VarianceModel`, and the
   render's `TileStats`."""
   return rendered_variance(mean_gaussians(vmodel.model), vmodel.log_var, camera,
                            vmodel.beta_min, settings=settings)
