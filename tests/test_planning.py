@@ -27,6 +27,7 @@ from mfsample.planning import (
 )
 from mfsample.planning.pool import stack_cameras
 from mfsample.scenes import get_scene
+from mfsample.train.evaluate import mean_metrics
 
 # ------------------------------------------------------------------ poses
 
@@ -343,8 +344,8 @@ def test_final_models_densify_when_their_config_asks():
   model = trainer.final_model(selected, 0)
   live = int(np.asarray(model.mask).sum())
   assert t.model.init_points < live <= t.model.max_gaussians
-  metrics, _ = runner.evaluate_model(model, pool.test, background=pool.background,
-                                     settings=trainer.settings["final"])
+  metrics, _ = mean_metrics(model, pool.test, background=pool.background,
+                              settings=trainer.settings["final"])
   assert np.isfinite(metrics["psnr"])
 
 
@@ -406,8 +407,8 @@ def test_batched_evaluation_matches_the_training_module(models):
 
   pool = tiny_pool()
   settings = RenderSettings(max_intersections=1 << 11)
-  ours, _ = runner.evaluate_model(models["deterministic"], pool.test,
-                                  background=pool.background, settings=settings)
+  ours, _ = mean_metrics(models["deterministic"], pool.test,
+                         background=pool.background, settings=settings)
   ref = evaluate(models["deterministic"], pool.test, background=pool.background,
                  settings=settings)
   assert ours["psnr"] == pytest.approx(ref.metrics["psnr"], rel=1e-4)

@@ -33,6 +33,7 @@ from mfsample.planning import training
 from mfsample.quality import arc as arc_lib
 from mfsample.quality import maps as maps_lib
 from mfsample.renderer.budget import render_with_budget
+from mfsample.train.evaluate import render_mean
 
 SAMPLER_KINDS = ("lowrank", "diagonal", "block")
 POSTHOC = "posthoc"
@@ -126,7 +127,7 @@ def same_mean(model, fitted):
              for g, v in model.params.mean.items())
 
 
-def evaluate_model(config, name, trained, train_views, test_views, seed):
+def ause_of_model(config, name, trained, train_views, test_views, seed):
   """Depth errors, every method's maps and their AUSE at the test views of one model.
 
   Args:
@@ -147,12 +148,12 @@ def evaluate_model(config, name, trained, train_views, test_views, seed):
   methods = method_keys(config, name)
   renders, errors, masks = [], [], []
   for i in range(len(test_views)):
-    out, settings = render_with_budget(maps_lib.mean_render, settings, model,
-                                       test_views.cameras[i], bg)
-    err, mask = maps_lib.depth_error(out.depth, out.alpha, test_views.depths[i],
+    out, settings = render_with_budget(render_mean, settings, model, test_views.cameras[i],
+                                       bg)
+    err, mask = maps_lib.depth_error(out.expected_depth(), out.alpha, test_views.depths[i],
                                      test_views.alphas[i], true_alpha_min=float(m.true_alpha_min),
                                      model_alpha_min=float(m.model_alpha_min))
-    renders.append(np.asarray(out.rgb))
+    renders.append(np.asarray(jnp.clip(out.rgb, 0.0, 1.0)))
     errors.append(err)
     masks.append(mask)
   maps, settings, extra = _method_maps(config, name, model, settings, train_views, test_views,
@@ -276,7 +277,7 @@ def run_ause(config, workdir, bar=None):
           trained = training.train_on_views(model_config(config.train, name), train_views,
                                             seed=int(seed), bounds=bounds,
                                             pad_to=len(train_views))
-          record, arrays = evaluate_model(config, name, trained, train_views, test_views,
+          record, arrays = ause_of_model(config, name, trained, train_views, test_views,
                                           int(seed))
           record.update(scene=scene, seed=int(seed), train_views=train_idx.tolist(),
                         test_views=test_idx.tolist(), seconds=time.perf_counter() - t0)

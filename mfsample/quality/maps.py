@@ -27,22 +27,6 @@ from mfsample.renderer import RenderSettings, TileStats, render
 from mfsample.uncertainty import pixel_variance, sample_gaussians
 
 
-class MeanRender(NamedTuple):
-  """The mean model seen from one camera.
-
-  Attributes:
-    rgb: [H, W, 3] colour, clipped to [0, 1].
-    alpha: [H, W] coverage.
-    depth: [H, W] expected camera z-depth (depth / alpha; 0 where alpha is ~0).
-    stats: `TileStats`.
-  """
-
-  rgb: chex.Array
-  alpha: chex.Array
-  depth: chex.Array
-  stats: TileStats
-
-
 class SampleMaps(NamedTuple):
   """Ours' per-pixel maps from M samples.
 
@@ -55,13 +39,6 @@ class SampleMaps(NamedTuple):
   colour: chex.Array
   depth: chex.Array
   stats: TileStats
-
-
-@functools.partial(jax.jit, static_argnames=("settings",))
-def mean_render(model, camera, background, *, settings: RenderSettings) -> MeanRender:
-  """`MeanRender` of a model's mean Gaussians."""
-  out = render(mean_gaussians(model), camera, background=background, settings=settings)
-  return MeanRender(jnp.clip(out.rgb, 0.0, 1.0), out.alpha, out.expected_depth(), out.stats)
 
 
 @functools.partial(jax.jit, static_argnames=("settings",))
