@@ -15,7 +15,7 @@ Then U(xi) (M = 2 samples, summed over the training cameras at 1 / `--u_downscal
 image size, as the protocol plans), its gradient w.r.t. xi, and the quadratic form Q are
 timed (medians over `--repeats` calls, compilation excluded).
 
-  PYTHONPATH=. python benchmarks/light_step.py --out=workdirs/light_step.json
+  python benchmarks/light_step.py --out=workdirs/light_step.json
 """
 
 import json
@@ -41,9 +41,9 @@ _OUT = flags.DEFINE_string("out", "workdirs/light_step.json", "Output JSON.")
 
 
 def _light_config():
-  from configs import light_planning
+  from mfsample.lighting.config import get_config
 
-  config = light_planning.get_config("tiny")
+  config = get_config("tiny")
   config.data.width = config.data.height = _SIZE.value
   config.data.num_train = _VIEWS.value
   config.data.synthetic.num_gaussians = 400
@@ -55,9 +55,9 @@ def _light_config():
 
 
 def _colour_config(light_config):
-  from configs import train
+  from mfsample.train.config import get_config
 
-  config = train.get_config("tiny")
+  config = get_config("tiny")
   config.model.sh_degree = _SH_DEGREE.value
   config.model.init_points = _POINTS.value
   config.data.background = (0.0, 0.0, 0.0)
@@ -130,16 +130,16 @@ def run(rounds, steps, repeats):
 
   def light_args(step):
     light, view = training.pair_for_step(0, step, 0, len(data.train_cameras), num_lights)
-    return (images, light_array, cams, jnp.int32(view), jnp.int32(light),
+    return ((images, light_array, cams), (jnp.int32(light), jnp.int32(view)),
             lsetup.sobol[step * m_l:(step + 1) * m_l])
 
   def colour_args(step):
-    return (colour_images, cams, jnp.int32(step % len(data.train_cameras)),
+    return ((colour_images, cams), jnp.int32(step % len(data.train_cameras)),
             csetup.sobol[step * m_c:(step + 1) * m_c])
 
-  light_fn = _grown(lambda s: training.make_relight_step(
-      dataclasses.replace(lsetup.step_config, settings=s)), lsetup.step_config.settings,
-      lstate, light_args)
+  light_fn = _grown(lambda s: make_train_step(
+      dataclasses.replace(lsetup.step_config, settings=s), lsetup.field),
+      lsetup.step_config.settings, lstate, light_args)
   colour_fn = _grown(lambda s: make_train_step(
       dataclasses.replace(csetup.step_config, settings=s)), csetup.step_config.settings,
       cstate, colour_args)

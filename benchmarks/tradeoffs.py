@@ -18,10 +18,10 @@ JSON (ms per step, peak memory) and copied into this one.
 
 The trained models come from `benchmarks/train_quality.py`:
 
-  PYTHONPATH=. python benchmarks/train_quality.py --size=100 --steps=5000 \
+  python benchmarks/train_quality.py --size=100 --steps=5000 \
       --variants=deterministic,rank2_every_step --workdir=workdirs/benchmarks/quality100
-  PYTHONPATH=. python benchmarks/train_step.py --rounds=3
-  PYTHONPATH=. python benchmarks/tradeoffs.py \
+  python benchmarks/train_step.py --rounds=3
+  python benchmarks/tradeoffs.py \
       --stochastic=workdirs/benchmarks/quality100/rank2_every_step \
       --deterministic=workdirs/benchmarks/quality100/deterministic
 """
@@ -89,8 +89,8 @@ def load_run(workdir, data=None):
     config.data.path = data
   dataset = data_lib.load_dataset(config.data)
   setup = loop.make_setup(config, dataset.train)
-  restored = loop.restore_latest(config, setup, dataset.bounds,
-                                 os.path.join(workdir, "checkpoints"))
+  restored = loop.restore_latest(os.path.join(workdir, "checkpoints"), setup,
+                                 lambda: loop.init_state(config, setup, dataset.bounds))
   if restored is None:
     raise FileNotFoundError(f"no checkpoint in {workdir}/checkpoints")
   state, setup, _ = restored

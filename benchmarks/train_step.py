@@ -10,15 +10,15 @@ off: this measures the jitted step (paper Tab. 4 measures the same thing per ite
 Each measurement runs in a fresh subprocess, so its peak RSS is its own and no compilation
 cache leaks between variants; `measure_variant` is the same measurement in this process.
 
-  PYTHONPATH=. python benchmarks/train_step.py --rounds=3
-  PYTHONPATH=. python benchmarks/train_step.py --clock=process  # on a CPU shared with others
+  python benchmarks/train_step.py --rounds=3
+  python benchmarks/train_step.py --clock=process  # on a CPU shared with others
 
 A variant `NAME@C` composites C chunks per loop step (`render.chunks_per_step`, a speed
 knob) and takes its ratio to `deterministic@C`; every variant also gets its ratio to the
 first one listed (`vs_first`, within a round), which compares the C of a sweep. On a GPU,
 where small steps are bound by launch latency, sweep it at the paper's scale:
 
-  PYTHONPATH=. python benchmarks/train_step.py --size=400 --points=100000 --rounds=1 \
+  python benchmarks/train_step.py --size=400 --points=100000 --rounds=1 \
       --variants=deterministic@16,deterministic@64,deterministic@256,deterministic@1024
 """
 
@@ -71,9 +71,9 @@ def base_config(data, size, points, samples):
   and M = `samples`; when `data` holds no NeRF Synthetic scene, the same at `size` on a
   synthetic scene of 2000 random Gaussians seen by 16 views (scene name "synthetic").
   """
-  from configs import train
+  from mfsample.train.config import get_config
 
-  config = train.get_config("lego")
+  config = get_config("lego")
   config.sampler.num_samples = samples
   config.model.init_points = points
   config.data.path = data
@@ -194,7 +194,7 @@ def measure_variant(config, *, steps, warmup, from_checkpoints=None, clock="wall
     view = jnp.int32(loop.view_for_step(0, step, len(views)))
     rows = setup.sobol[step * m:(step + 1) * m]
     t = timer()
-    new_state, metrics = fn(state, views.images, views.cameras, view, rows)
+    new_state, metrics = fn(state, (views.images, views.cameras), view, rows)
     jax.block_until_ready(new_state)
     dt = timer() - t
     if bool(metrics.overflow):

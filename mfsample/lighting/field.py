@@ -21,12 +21,14 @@ works on any groups) and densification are the colour model's; only the activati
 `relit_gaussians` here instead of `mfsample.model.activate`.
 """
 
+import dataclasses
 import math
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from mfsample import samplers
 from mfsample.gaussians import Gaussians
 from mfsample.model import (
     LOG_SCALE_RANGE,
@@ -150,6 +152,33 @@ def render_relit(raw, mask, xi, camera, *, settings: RenderSettings, screen_offs
   g, features = relit_gaussians(raw, mask, xi, camera)
   return render(g, camera, settings=settings, features=features,
                 screen_offset=screen_offset)
+
+
+@dataclasses.dataclass(frozen=True)
+class RelightableField:
+  """The relightable field as the training step's `Field` (`mfsample.train.step`).
+
+  Training data: (images [L, V, H, W, 3] of L light slots and V views, lights [L, n],
+  `Camera` [V]); a step's index: (light slot, view), int32 each. A sample theta(z) is
+  rendered under the slot's light (`render_relit`: linear radiance, black background). No
+  per-step schedule (no SH colour).
+  """
+
+  out_coeffs: int  # m
+  light_coeffs: int  # n
+
+  def prepare(self, model, step, cfg):
+    del step, cfg
+    return model
+
+  def target(self, data, index):
+    images, lights, cameras = data
+    light, view = index
+    return images[light, view], cameras[view], lights[light]
+
+  def render(self, model, z, camera, light, cfg, screen_offset):
+    return render_relit(samplers.perturb(model, z), model.mask, light, camera,
+                        settings=cfg.settings, screen_offset=screen_offset)
 
 
 def render_basis(raw, mask, camera, *, settings: RenderSettings):

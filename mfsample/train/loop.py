@@ -1,17 +1,17 @@
-"""The host loop: `train` (reusable) and `train_and_evaluate` (the experiment entry point).
+"""The host loop: `run_steps` (every field) and `train` (reusable).
 
-The loop is thin: it picks the view and Sobol rows of each step (both functions of
-(seed, step)), calls the jitted step, grows the render budget when a step reports
-overflow (the step left the state untouched, so it is simply re-run), and runs the host
-events of 3DGS (densification, opacity reset) and checkpoints between steps.
+The loop is thin: it picks the target of each step (a function of (seed, step)), calls the
+jitted step, grows the render budget when a step reports overflow (the step left the state
+untouched, so it is simply re-run), and runs the host events of 3DGS (densification, opacity
+reset) between steps (`run_steps`, shared by the colour and the relightable field). `train`
+adds the log, the progress bar and checkpoints.
 
-Resuming is safe: a workdir (`train_and_evaluate`) or checkpoint directory (`train`) made
-with a different config is refused, naming the fields that differ; a checkpoint that
-cannot be read is reported by path and the newest intact one is used instead.
+Resuming is safe: a checkpoint directory made with a different config is refused, naming
+the fields that differ; a checkpoint that cannot be read is reported by path and the newest
+intact one is used instead (`restore_latest`, for every field).
 """
 
 import dataclasses
-import os
 import time
 import warnings
 from typing import NamedTuple
@@ -20,18 +20,25 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from mfsample import interrupts
 from mfsample import workdir as workdir_lib
-from mfsample._json import without_fields, write_json
+from mfsample._json import without_fields
 from mfsample.data import datasets as data_lib
 from mfsample.model import GROUPS, SamplerSpec, group_shapes
 from mfsample.renderer.budget import BudgetExceededError, fit_budget
-from mfsample.renderer.settings import RenderSettings
 from mfsample.samplers import sobol_z
 from mfsample.train import checkpoint as ckpt
 from mfsample.train import densify as densify_lib
 from mfsample.train import initial, optim
-from mfsample.train.config import validate
-from mfsample.train.step import StepConfig, TrainState, init_train_state, make_train_step
+from mfsample.train.config import SPEED_ONLY_FIELDS, render_settings, validate
+from mfsample.train.step import (
+    COLOUR,
+    StepConfig,
+    StepMetrics,
+    TrainState,
+    init_train_state,
+    make_train_step,
+)
 
 
 class TrainSetup(NamedTuple):
@@ -42,8 +49,9 @@ class TrainSetup(NamedTuple):
   spec: SamplerSpec
   init_scales: dict  # {group: float} scale of fresh B_hat entries
   step_config: StepConfig  # static settings of the jitted step (budget included)
-  num_steps: int
+  num_steps: int  # steps of the whole run (the schedules span them)
   sobol: np.ndarray  # [num_steps * M, k] z rows (empty unless lowrank + Sobol)
+  field: object = COLOUR  # the step's `Field` (static): colour, or relightable
 
 
 class TrainResult(NamedTuple):
@@ -61,23 +69,30 @@ class TrainResult(NamedTuple):
 # ------------------------------------------------------------------------- setup
 
 
-def sampler_spec(config, extent, sh_degree):
-  """`SamplerSpec` from `config.sampler` (bounds of the centres scale with the extent)."""
-  groups = tuple(g for g in config.sampler.groups if g in group_shapes(sh_degree))
-  bounds = tuple((g, float(config.sampler.bounds[g]) * (extent if g == "means" else 1.0))
+def sampler_spec(sampler_config, extent, shapes):
+  """`SamplerSpec` of a config's `sampler` block for a model with parameter groups `shapes`
+  ({group: shape}); the bounds of the centres scale with the extent."""
+  groups = tuple(g for g in sampler_config.groups if g in shapes)
+  bounds = tuple((g, float(sampler_config.bounds[g]) * (extent if g == "means" else 1.0))
                  for g in groups)
-  return SamplerSpec(kind=config.sampler.kind, rank=int(config.sampler.rank), groups=groups,
+  return SamplerSpec(kind=sampler_config.kind, rank=int(sampler_config.rank), groups=groups,
                      bounds=bounds)
 
 
-# Training-config fields that change only how fast a run goes, never what it computes
-# (beyond float rounding): a resumed run or a reused result may differ in them.
-SPEED_ONLY_FIELDS = ("render.chunks_per_step", "render.compositor")
+def init_scales(sampler_config, extent, groups):
+  """{group: scale of fresh B_hat entries}: `init_scale`, times the extent for the groups of
+  `init_extent_groups`."""
+  s = sampler_config
+  return {g: float(s.init_scale) * (extent if g in s.init_extent_groups else 1.0)
+          for g in groups}
 
 
-def without_speed_only_fields(train_config_dict):
-  """A training config as a JSON dict, less `SPEED_ONLY_FIELDS`: what results depend on."""
-  return without_fields(train_config_dict, SPEED_ONLY_FIELDS)
+def sobol_rows(spec, count, seed, source="sobol"):
+  """[count, k] scrambled Sobol z rows of the steps (`source` "sobol", low-rank B_hat), or an
+  empty [count, 0] (the step then draws uniform z from its key)."""
+  if spec.kind == "lowrank" and spec.stochastic and source == "sobol":
+    return sobol_z(int(count), spec.rank, int(seed))
+  return np.zeros((int(count), 0), np.float32)
 
 
 # Fields a resumed run may change: the speed-only ones, the progress bar, and which
@@ -89,20 +104,6 @@ RESUME_FREE_FIELDS = SPEED_ONLY_FIELDS + ("train.progress", "train.checkpoint_ev
 def resumable_config(config):
   """A training config as a JSON dict, less `RESUME_FREE_FIELDS` (what checkpoints record)."""
   return without_fields(workdir_lib.config_dict(config), RESUME_FREE_FIELDS)
-
-
-def render_settings(render_config):
-  """`RenderSettings` of a training config's `render` block.
-
-  The initial budget is rounded up to a whole number of compositing steps
-  (chunk_size x chunks_per_step), so any `chunks_per_step` is valid with any start.
-  """
-  chunks_per_step = int(render_config.get("chunks_per_step", RenderSettings.chunks_per_step))
-  return RenderSettings.holding(
-      render_config.max_intersections, tile_size=int(render_config.tile_size),
-      chunks_per_step=chunks_per_step,
-      radius_sigma=float(render_config.get("radius_sigma", RenderSettings.radius_sigma)),
-      compositor=str(render_config.get("compositor", RenderSettings.compositor)))
 
 
 def make_setup(config, train_views, *, extent=None, key=None):
@@ -120,19 +121,15 @@ def make_setup(config, train_views, *, extent=None, key=None):
   if extent is None:
     extent = (config.data.extent if config.data.get("extent") is not None
               else data_lib.scene_extent(train_views.cameras))
-  sh_degree = int(config.model.sh_degree)
-  spec = sampler_spec(config, extent, sh_degree)
-  init_scales = {g: config.sampler.init_scale * (extent if g in config.sampler.init_extent_groups
-                                                 else 1.0) for g in GROUPS}
+  spec = sampler_spec(config.sampler, extent, group_shapes(int(config.model.sh_degree)))
   num_steps = int(config.train.num_steps)
   max_steps = config.optim.position_lr_max_steps or num_steps
   rates = optim.learning_rates(config.optim, config.sampler.lr, extent, max_steps)
   volume_weight = config.loss.volume_weight
   if volume_weight is None:
     volume_weight = 1.0 / len(train_views)
-  settings = render_settings(config.render)
   step_config = StepConfig(
-      settings=settings,
+      settings=render_settings(config.render),
       background=tuple(float(c) for c in config.data.background),
       num_samples=int(config.sampler.num_samples),
       ssim_weight=float(config.loss.ssim_weight),
@@ -145,16 +142,13 @@ def make_setup(config, train_views, *, extent=None, key=None):
                         else int(config.sampler.stochastic_until)),
       rates=rates,
   )
-  m = step_config.num_samples
-  if spec.kind == "lowrank" and spec.stochastic and config.sampler.z == "sobol":
-    sobol = sobol_z(num_steps * m, spec.rank, int(config.sampler.z_seed))
-  elif config.sampler.z not in ("sobol", "uniform"):
+  if config.sampler.z not in ("sobol", "uniform"):
     raise ValueError(f"config.sampler.z must be 'sobol' or 'uniform', got {config.sampler.z!r}")
-  else:
-    sobol = np.zeros((num_steps * m, 0), np.float32)
-  return TrainSetup(seed=seed, extent=float(extent), spec=spec, init_scales=init_scales,
-                    step_config=step_config,
-                    num_steps=num_steps, sobol=sobol)
+  sobol = sobol_rows(spec, num_steps * step_config.num_samples, config.sampler.z_seed,
+                     config.sampler.z)
+  return TrainSetup(seed=seed, extent=float(extent), spec=spec,
+                    init_scales=init_scales(config.sampler, extent, GROUPS),
+                    step_config=step_config, num_steps=num_steps, sobol=sobol)
 
 
 def init_state(config, setup: TrainSetup, bounds, points=None):
@@ -176,26 +170,35 @@ def view_for_step(seed, step, num_views):
 # ------------------------------------------------------------------------- training
 
 
-def _meta(config, setup, state, history, train_seconds):
+def checkpoint_meta(state, setup: TrainSetup, **extra):
+  """A checkpoint's metadata: step, capacity and render budget (what `restore_latest` needs
+  to rebuild the state and its settings), and `extra` (the caller's record)."""
   return {"step": int(state.step), "capacity": int(state.model.capacity),
-          "max_intersections": int(setup.step_config.settings.max_intersections),
-          "seed": setup.seed, "sobol_seed": int(config.sampler.z_seed),
-          "sobol_position": int(state.step) * setup.step_config.num_samples,
-          "extent": setup.extent, "history": history, "train_seconds": train_seconds,
-          "config": resumable_config(config)}
+          "max_intersections": int(setup.step_config.settings.max_intersections), **extra}
 
 
-def restore_latest(config, setup, bounds, directory, points=None):
+def _meta(config, setup, state, history, train_seconds):
+  return checkpoint_meta(
+      state, setup, seed=setup.seed, sobol_seed=int(config.sampler.z_seed),
+      sobol_position=int(state.step) * setup.step_config.num_samples, extent=setup.extent,
+      history=history, train_seconds=train_seconds, config=resumable_config(config))
+
+
+def restore_latest(directory, setup: TrainSetup, initial_state, check=None):
   """(state, setup, meta) from the newest intact checkpoint in `directory`, or None if none.
 
-  `meta` holds the training log up to that step ("history") and the wall-clock spent
-  reaching it ("train_seconds"). An unreadable checkpoint (truncated, overwritten) is
-  reported with a warning naming it, and the next older one is tried; a later save replaces
-  it.
+  Works for every field. An unreadable checkpoint (truncated, overwritten) is reported with a
+  warning naming it, and the next older one is tried; a later save replaces it.
+
+  Args:
+    directory: the checkpoint folder.
+    setup: the run's `TrainSetup`; the returned one renders with the checkpoint's budget.
+    initial_state: () -> the run's step-0 `TrainState`, the template of the saved one (grown
+      to the checkpoint's capacity).
+    check: optional (meta, path) -> None that refuses a checkpoint of another run by raising
+      (`train_and_evaluate`'s: another config or seed).
 
   Raises:
-    mfsample.workdir.WorkdirError: the checkpoints were written by a run with another config
-      or seed (the message names the fields).
     ckpt.CorruptCheckpointError: checkpoints exist but none can be read.
   """
   paths = ckpt.list_checkpoints(directory)
@@ -205,9 +208,9 @@ def restore_latest(config, setup, bounds, directory, points=None):
   for path in reversed(paths):
     try:
       meta = ckpt.read_meta(path)
-      _check_checkpoint_config(config, setup, meta, path)
-      template = init_state(config, setup, bounds, points)
-      template = densify_lib.grow_capacity(template, meta["capacity"])
+      if check is not None:
+        check(meta, path)
+      template = densify_lib.grow_capacity(initial_state(), meta["capacity"])
       state, meta = ckpt.restore_checkpoint(path, template)
     except ckpt.CorruptCheckpointError as e:
       warnings.warn(f"{e}; trying an older checkpoint", stacklevel=2)
@@ -241,8 +244,6 @@ def _check_checkpoint_config(config, setup, meta, path):
 def with_grown_budget(setup, metrics, max_budget, step):
   """`setup` whose step renders with a budget that holds the overflowing step's intersections.
 
-  Works for any setup NamedTuple with a `step_config` (colour and relightable training).
-
   Raises:
     BudgetExceededError: the step needs more than `max_budget` (config.render.max_budget).
   """
@@ -254,8 +255,9 @@ def with_grown_budget(setup, metrics, max_budget, step):
   return setup._replace(step_config=dataclasses.replace(setup.step_config, settings=settings))
 
 
-def _host_events(config, setup, state, step):
-  """Densification and opacity reset after `step` completed steps (3DGS schedule)."""
+def host_events(config, setup, state, step):
+  """Densification and opacity reset after `step` completed steps (3DGS's schedule,
+  `config.densify`); returns (state, the densification's report or None)."""
   d = config.densify
   report = None
   if d.start < step < d.stop and step % d.every == 0:
@@ -265,10 +267,59 @@ def _host_events(config, setup, state, step):
         min_opacity=d.min_opacity, init_scales=setup.init_scales,
         max_gaussians=config.model.max_gaussians, prune_big=step > d.prune_big_after,
         max_screen_size=d.max_screen_size, max_world_size=d.max_world_size)
+  # 3DGS resets opacities at the start of densification on a white background too.
   white = all(c == 1.0 for c in setup.step_config.background)
   if step < d.stop and (step % d.opacity_reset_every == 0 or (white and step == d.start)):
     state = densify_lib.reset_opacity(state)
   return state, report
+
+
+class StepDone(NamedTuple):
+  """What `run_steps` yields after every completed step."""
+
+  state: TrainState
+  setup: TrainSetup  # with the render budget that sufficed
+  metrics: StepMetrics
+  report: object  # the densification report of this step, or None
+
+
+def run_steps(config, setup: TrainSetup, state, data, *, pick, end, max_traces=None):
+  """Runs the jitted step from `state.step` to `end`, on any field.
+
+  A step that overflows its render budget changed nothing: the budget grows
+  (`config.render.max_budget` at most) and the step runs again. After every completed step
+  the host events of 3DGS run (`host_events`).
+
+  Args:
+    config: a config with `densify`, `model.max_gaussians` and `render.max_budget` (a
+      training config, or the light-planning config).
+    setup: `TrainSetup` (its `field` says what `data` and the indices are).
+    state: `TrainState`.
+    data: the field's training data, device arrays (`ColourField`: (images, cameras)).
+    pick: step -> the step's index into `data` (a function of the seed and the step, so
+      that a resumed run draws the same).
+    end: stop when this many steps are done in total.
+    max_traces: passed to `make_train_step` (tests: 1).
+
+  Yields:
+    `StepDone` after every completed step.
+
+  Raises:
+    mfsample.interrupts.Interrupted: a stop was requested (between two steps).
+  """
+  step_fn = make_train_step(setup.step_config, setup.field, max_traces)
+  m = setup.step_config.num_samples
+  step = int(state.step)
+  while step < end:
+    interrupts.check(f"at step {step}")  # a safe point: between two steps
+    new_state, metrics = step_fn(state, data, pick(step), setup.sobol[step * m:(step + 1) * m])
+    if bool(metrics.overflow):  # nothing was updated: grow the budget and redo the step
+      setup = with_grown_budget(setup, metrics, int(config.render.max_budget), step)
+      step_fn = make_train_step(setup.step_config, setup.field, max_traces)
+      continue
+    state, step = new_state, step + 1
+    state, report = host_events(config, setup, state, step)
+    yield StepDone(state, setup, metrics, report)
 
 
 def train(config, views, key=None, *, setup=None, state=None, bounds=None,
@@ -309,7 +360,9 @@ def train(config, views, key=None, *, setup=None, state=None, bounds=None,
     bounds = (np.full(3, lo), np.full(3, hi))
   history, seconds_before = [], 0.0
   if state is None and checkpoint_dir:
-    restored = restore_latest(config, setup, bounds, checkpoint_dir, points)
+    restored = restore_latest(
+        checkpoint_dir, setup, lambda: init_state(config, setup, bounds, points),
+        check=lambda meta, path: _check_checkpoint_config(config, setup, meta, path))
     if restored is not None:
       state, setup, meta = restored
       history = list(meta.get("history", []))
@@ -317,32 +370,37 @@ def train(config, views, key=None, *, setup=None, state=None, bounds=None,
   if state is None:
     state = init_state(config, setup, bounds, points)
   views = data_lib.to_device(views)
-  m = setup.step_config.num_samples
-  step_fn = make_train_step(setup.step_config, max_traces)
   step = int(state.step)
   end = setup.num_steps if stop_at is None else min(stop_at, setup.num_steps)
   num_views = len(views) if num_views is None else int(num_views)
   bar = tqdm(total=setup.num_steps, initial=step, disable=not config.train.progress,
              desc=f"train {setup.spec.kind}", dynamic_ncols=True)
   t0 = time.perf_counter()
-  while step < end:
-    view = jnp.int32(view_for_step(setup.seed, step, num_views))
-    rows = setup.sobol[step * m:(step + 1) * m]
-    new_state, metrics = step_fn(state, views.images, views.cameras, view, rows)
-    if bool(metrics.overflow):  # nothing was updated: grow the budget and redo the step
-      setup = with_grown_budget(setup, metrics, int(config.render.max_budget), step)
-      step_fn = make_train_step(setup.step_config, max_traces)
-      continue
-    state, step = new_state, step + 1
-    state, report = _host_events(config, setup, state, step)
+  pick = lambda s: jnp.int32(view_for_step(setup.seed, s, num_views))  # noqa: E731
+  steps = run_steps(config, setup, state, (views.images, views.cameras), pick=pick, end=end,
+                    max_traces=max_traces)
+  saved = step
+  while True:
+    try:
+      done = next(steps)
+    except StopIteration:
+      break
+    except interrupts.Interrupted:
+      if checkpoint_dir and saved != step:  # the steps done so far are kept
+        meta = _meta(config, setup, state, history, seconds_before + time.perf_counter() - t0)
+        ckpt.save_checkpoint(checkpoint_dir, state, meta, keep=config.train.keep_checkpoints)
+      bar.close()
+      raise
+    state, setup, metrics = done.state, done.setup, done.metrics
+    step = int(state.step)
     if step % config.train.log_every == 0 or step == end:
       entry = {"step": step, "loss": float(metrics.loss), "data_loss": float(metrics.data_loss),
                "volume": float(metrics.volume), "live": state.model.num_live,
                "capacity": state.model.capacity,
                "budget": setup.step_config.settings.max_intersections,
                "seconds": seconds_before + time.perf_counter() - t0}
-      if report is not None:
-        entry["densify"] = report._asdict()
+      if done.report is not None:
+        entry["densify"] = done.report._asdict()
       history.append(entry)
       bar.set_postfix(loss=f"{entry['data_loss']:.4f}", n=entry["live"])
     bar.update(1)
@@ -350,84 +408,7 @@ def train(config, views, key=None, *, setup=None, state=None, bounds=None,
                            or (step == setup.num_steps)):
       meta = _meta(config, setup, state, history, seconds_before + time.perf_counter() - t0)
       ckpt.save_checkpoint(checkpoint_dir, state, meta, keep=config.train.keep_checkpoints)
+      saved = step
   bar.close()
   seconds = time.perf_counter() - t0
   return TrainResult(state, setup, history, seconds, seconds_before + seconds)
-
-
-# ------------------------------------------------------------------------- experiment
-
-
-def check_workdir(config, workdir):
-  """Refuses `workdir` when it holds checkpoints or results of another training config.
-
-  Fields in `RESUME_FREE_FIELDS` may differ. A stale `config.json` with nothing computed
-  from it is simply replaced.
-
-  Raises:
-    mfsample.workdir.WorkdirError: naming the differing fields.
-  """
-  has_results = bool(ckpt.list_checkpoints(os.path.join(workdir, "checkpoints"))) or any(
-      os.path.exists(os.path.join(workdir, name)) for name in ("metrics.json",
-                                                               "train_log.json"))
-  workdir_lib.check_same_config(
-      config, workdir, free_fields=RESUME_FREE_FIELDS, has_results=has_results,
-      results="checkpoints or results",
-      remedy="use a new --workdir, or the config that made them")
-
-
-def train_and_evaluate(config, workdir):
-  """Loads the data, trains (resuming from `workdir`), evaluates, writes everything.
-
-  Writes to `workdir`: `checkpoints/`, `config.json`, `train_log.json`, `metrics.json`
-  (test PSNR / SSIM / LPIPS of the mean model, iterations, wall-clock), `images/`
-  (renders, ground truth, uncertainty maps of test views) and `point_cloud.ply`, each
-  atomically. Nothing is written before the config is validated
-  (`mfsample.train.config.validate`), the workdir is known to hold no results of another
-  config (`check_workdir`) and the data are loaded.
-
-  Returns:
-    the final `TrainState`.
-  """
-  from mfsample import metrics
-  from mfsample.data import ply as export_ply
-  from mfsample.train import evaluate as eval_lib
-
-  validate(config)
-  check_workdir(config, workdir)
-  dataset = data_lib.load_dataset(config.data)
-  workdir_lib.write_config(config, workdir)
-  result = train(config, dataset.train, bounds=dataset.bounds,
-                 checkpoint_dir=os.path.join(workdir, "checkpoints"), points=dataset.points)
-  state, setup = result.state, result.setup
-  write_json(os.path.join(workdir, "train_log.json"), result.history)
-
-  lpips_fn = metrics.make_lpips(config.eval.lpips_net) if config.eval.lpips_net else None
-  model = state.model
-  z = None
-  if model.spec.stochastic and config.eval.uncertainty_samples > 0:
-    from mfsample import samplers
-    m = int(config.eval.uncertainty_samples)
-    key = jax.random.PRNGKey(setup.seed + 3)
-    rows = sobol_z(m, model.spec.rank, int(config.sampler.z_seed) + 1) \
-        if model.spec.kind == "lowrank" else None
-    z = samplers.draw_z(model, m, key, rows)
-  t0 = time.perf_counter()
-  ev = eval_lib.evaluate(model, dataset.test, background=dataset.background,
-                         settings=setup.step_config.settings, lpips_fn=lpips_fn,
-                         uncertainty_z=z)
-  eval_seconds = time.perf_counter() - t0
-  eval_lib.save_images(os.path.join(workdir, "images"), ev, dataset.test,
-                       num=config.eval.save_images)
-  if config.eval.export_ply:
-    export_ply.export_ply(os.path.join(workdir, "point_cloud.ply"), model)  # atomic
-  summary = dict(ev.metrics)
-  summary.update({
-      "sampler": model.spec.kind, "rank": model.spec.rank,
-      "steps": int(state.step), "live_gaussians": model.num_live,
-      "train_seconds": result.train_seconds, "eval_seconds": eval_seconds,
-      "resolution": [int(dataset.train.images.shape[2]), int(dataset.train.images.shape[1])],
-      "num_train_views": len(dataset.train), "per_view": ev.per_view,
-  })
-  write_json(os.path.join(workdir, "metrics.json"), summary)
-  return state

@@ -1,11 +1,16 @@
 """The training state and the jitted training step (static shapes, no host logic).
 
-One step: draw z, render M samples theta(z) of the model into one training view, take the
+One step: draw z, render M samples theta(z) of the model into one training target, take the
 gradient of the Eq. 9 loss w.r.t. the mean and B_hat, apply Adam with per-group learning
 rates, clamp B_hat into its bounds, and accumulate the densification statistics. If any
 render overflowed its intersection budget the step returns the *unchanged* state and
 raises `overflow`: the host grows the budget and re-runs the step, so training never
 updates on a truncated image.
+
+What differs between kinds of field is a small static interface, `Field`: which image,
+camera (and light) a step trains on, how a sample of the model is rendered there, and the
+per-step schedule of the model (3DGS's rising SH degree). `ColourField` is the 3DGS colour
+field (SH colour per Gaussian); the relightable field of `mfsample.lighting` is the other.
 """
 
 import dataclasses
@@ -116,6 +121,42 @@ class StepConfig:
     return optim.make_optimizer(self.rates)
 
 
+@dataclasses.dataclass(frozen=True)
+class ColourField:
+  """A field with SH colour per Gaussian (3DGS): the step's `Field`.
+
+  Training data: (images [V, H, W, 3], `Camera` [V]); a step's index: the view (int32).
+  The active SH degree rises by one every `StepConfig.sh_degree_every` steps (all bands from
+  the first step when it is 0).
+
+  Every `Field` is a frozen (hashable) dataclass, a static argument of the jitted step, with
+  these three methods.
+  """
+
+  def prepare(self, model, step, cfg: "StepConfig"):
+    """The model as the step sees it (its active SH degree at `step`)."""
+    max_degree = model.max_sh_degree
+    if cfg.sh_degree_every > 0:
+      degree = jnp.minimum(step // cfg.sh_degree_every, max_degree)
+    else:
+      degree = jnp.asarray(max_degree)
+    return model.replace(sh_degree=degree.astype(jnp.int32))
+
+  def target(self, data, index):
+    """(image [H, W, 3], camera, extra) of the step: the view `index`."""
+    images, cameras = data
+    return images[index], cameras[index], None
+
+  def render(self, model, z, camera, extra, cfg: "StepConfig", screen_offset):
+    """`RenderOutput` of the sample theta(z) of `model` seen by `camera`."""
+    del extra
+    return render(samplers.sample(model, z), camera, background=cfg.background,
+                  settings=cfg.settings, screen_offset=screen_offset)
+
+
+COLOUR = ColourField()
+
+
 def init_train_state(model: Model, cfg: StepConfig, key):
   """A fresh `TrainState` (step 0) for `model`."""
   return TrainState(step=jnp.int32(0), model=model, opt_state=cfg.optimizer.init(model.params),
@@ -142,30 +183,24 @@ def step_schedule(cfg, model, key, step, sobol_rows):
   volume_on = ((step + 1) % cfg.volume_every == 0) & (step < cfg.volume_until)
   return z, jnp.where(volume_on, cfg.volume_weight, 0.0)
 
-def train_step(state: TrainState, images, cameras, view, sobol_rows, *, cfg: StepConfig):
+def train_step(state: TrainState, data, index, sobol_rows, *, cfg: StepConfig,
+               field=COLOUR):
   """One optimisation step (pure; `train_step_jit` is its jitted form).
 
   Args:
     state: `TrainState`.
-    images: [V, H, W, 3] training images.
-    cameras: `Camera` batched over V.
-    view: int32 scalar, the training view of this step.
+    data: the field's training data (`ColourField`: images [V, H, W, 3] and `Camera` [V]).
+    index: the step's target in `data` (`ColourField`: the view, int32).
     sobol_rows: [M, k] Sobol z's of this step (low-rank sampler; ignored otherwise).
     cfg: `StepConfig` (static).
+    field: the `Field` (static): what a step trains on and how a sample is rendered.
 
   Returns:
     (new state, `StepMetrics`).
   """
   step = state.step
-  model = state.model
-  max_degree = model.max_sh_degree
-  if cfg.sh_degree_every > 0:
-    model = model.replace(sh_degree=jnp.minimum(step // cfg.sh_degree_every, max_degree)
-                          .astype(jnp.int32))
-  else:
-    model = model.replace(sh_degree=jnp.asarray(max_degree, jnp.int32))
-  image = images[view]
-  camera = cameras[view]
+  model = field.prepare(state.model, step, cfg)
+  image, camera, extra = field.target(data, index)
   z, volume_weight = step_schedule(cfg, model, state.key, step, sobol_rows)
   offset2d = jnp.zeros((model.capacity, 2), model.params.mean["means"].dtype)
 
@@ -175,22 +210,21 @@ def train_step(state: TrainState, images, cameras, view, sobol_rows, *, cfg: Ste
     m = model.replace(params=params)
 
     def one(z_i):
-      out = render(samplers.sample(m, z_i), camera, background=cfg.background,
-                   settings=cfg.settings, screen_offset=offset2d)
+      out = field.render(m, z_i, camera, extra, cfg, offset2d)
       return losses.photometric(out.rgb, image, cfg.ssim_weight), (out.radii, out.visible,
                                                                     out.stats)
 
     if cfg.num_samples == 1:
       # A plain call keeps the renderer's cheap skipping of unused budget (vmap would not).
-      data, aux = jax.tree.map(lambda x: x[None], one(z[0]))
+      data_loss, aux = jax.tree.map(lambda x: x[None], one(z[0]))
     else:
-      data, aux = jax.lax.map(one, z)  # sequential: same reason, and bounded memory
-    data = jnp.mean(data)
-    volume = losses.volume(m) if m.spec.stochastic else jnp.zeros((), data.dtype)
-    return data - volume_weight * volume, (data, volume, aux)
+      data_loss, aux = jax.lax.map(one, z)  # sequential: same reason, and bounded memory
+    data_loss = jnp.mean(data_loss)
+    volume = losses.volume(m) if m.spec.stochastic else jnp.zeros((), data_loss.dtype)
+    return data_loss - volume_weight * volume, (data_loss, volume, aux)
 
   grad_fn = jax.value_and_grad(loss_fn, argnums=(0, 1), has_aux=True)
-  (loss, (data, volume, (radii, visible, stats))), (grads, grad2d) = grad_fn(
+  (loss, (data_loss, volume, (radii, visible, stats))), (grads, grad2d) = grad_fn(
       model.params, offset2d)
 
   updates, opt_state = cfg.optimizer.update(grads, state.opt_state, model.params)
@@ -217,24 +251,40 @@ def train_step(state: TrainState, images, cameras, view, sobol_rows, *, cfg: Ste
   chex.assert_trees_all_equal_shapes_and_dtypes(state, new_state)
   overflow = jnp.any(stats.overflow)
   new_state = jax.tree.map(lambda old, new: jnp.where(overflow, old, new), state, new_state)
-  metrics = StepMetrics(loss=loss, data_loss=data, volume=volume, overflow=overflow,
+  metrics = StepMetrics(loss=loss, data_loss=data_loss, volume=volume, overflow=overflow,
                         num_padded=jnp.max(stats.num_padded))
   return new_state, metrics
 
 
-# Jitted with the (hashable) step config static: runs with equal configs share compilations.
-train_step_jit = jax.jit(train_step, static_argnames=("cfg",))
+# Jitted with the (hashable) step config and field static: runs with equal configs share
+# compilations.
+train_step_jit = jax.jit(train_step, static_argnames=("cfg", "field"))
 
 
-def make_train_step(cfg: StepConfig, max_traces=None):
-  """`fn(state, images, cameras, view, sobol_rows) -> (state, StepMetrics)`, jitted.
+def clear_compiled_steps():
+  """Drops every compiled training step (`train_step_jit`'s cache), and nothing else.
+
+  Each model that densifies compiles the step anew for every capacity bucket and view count
+  it passes through, and XLA:CPU keeps each executable's code mapped in memory: over the
+  densified models of a long study the mappings exhaust the process's limit
+  (vm.max_map_count, 65530 on Linux; seen in the lego study's second seed). A caller that
+  trains many such models clears the steps between them; the next model recompiles the few
+  shapes it needs, seconds against its minutes of training.
+  """
+  train_step_jit.clear_cache()
+
+
+def make_train_step(cfg: StepConfig, field=COLOUR, max_traces=None):
+  """`fn(state, data, index, sobol_rows) -> (state, StepMetrics)`, jitted.
 
   Args:
     cfg: `StepConfig`.
+    field: the `Field` (default: `COLOUR`).
     max_traces: if set, a separately jitted step wrapped in `chex.assert_max_traces`
       (tests use it to show that the step does not retrace); otherwise `train_step_jit`.
   """
   if max_traces is None:
-    return functools.partial(train_step_jit, cfg=cfg)
+    return functools.partial(train_step_jit, cfg=cfg, field=field)
   counted = chex.assert_max_traces(train_step, n=max_traces)
-  return functools.partial(jax.jit(counted, static_argnames=("cfg",)), cfg=cfg)
+  return functools.partial(jax.jit(counted, static_argnames=("cfg", "field")), cfg=cfg,
+                           field=field)
