@@ -39,7 +39,10 @@ GROUPS = ("means", "log_scales", "quats", "opacity_logits", "sh_dc", "sh_rest")
 TRANSFER_GROUPS = ("transfer_dc", "transfer_rest")
 GROUP_ORDER = GROUPS + TRANSFER_GROUPS
 
+# The kinds of generator B_hat (`SamplerSpec.kind`): the one definition every config
+# validator reads. The stochastic ones have a B_hat; "deterministic" is plain 3DGS.
 SAMPLER_KINDS = ("deterministic", "diagonal", "block", "lowrank")
+STOCHASTIC_KINDS = ("lowrank", "diagonal", "block")
 
 # Log-scales are clamped to this range before exp: far beyond any real Gaussian (e^10 world
 # units), it keeps samples finite even when B_hat sits at its bounds with many columns

@@ -1,5 +1,7 @@
 """Next-light strategies behind one interface: (model, cameras, lights used) -> the next light.
 
+`STRATEGIES` is the registry: every strategy's name, label, function and random stream.
+
 Every strategy returns a light of the same norm, |xi| = `LightInputs.norm` (by default the
 uniform light's, sqrt(4 pi)), because U(c xi) = c^2 U(xi): lights of different norms cannot
 be ranked by U, and a brighter light is not a more informative one for a linear model. A
@@ -30,18 +32,11 @@ from typing import NamedTuple
 import jax
 import numpy as np
 
+from mfsample import streams
 from mfsample.lighting import lights as lights_lib
 from mfsample.lighting import optimize as opt_lib
 from mfsample.lighting import uncertainty as lu
-
-LABELS = {
-    "random": "Random",
-    "sobol": "Sobol",
-    "orthogonal": "Orthogonal random",
-    "ours": "Ours",
-    "ours_exact": "Ours (exact)",
-}
-NAMES = tuple(LABELS)
+from mfsample.renderer.budget import Budgets
 
 
 class LightInputs(NamedTuple):
@@ -57,7 +52,7 @@ class LightInputs(NamedTuple):
     index: the number of lights used so far.
     norm: the common norm of the lights.
     ascent: `optimize.AscentSettings` (Ours).
-    settings: {purpose: RenderSettings} budgets that sufficed before ("ascent").
+    budgets: `Budgets` that sufficed before (`u`: U over the cameras; `ascent`).
     sobol_seed: scrambling seed of the Sobol strategy.
   """
 
@@ -69,7 +64,7 @@ class LightInputs(NamedTuple):
   index: int
   norm: float
   ascent: opt_lib.AscentSettings
-  settings: dict
+  budgets: Budgets
   sobol_seed: int = 1
 
 
@@ -78,11 +73,13 @@ class LightChoice(NamedTuple):
 
   Attributes:
     light: [n] float64, |light| = norm, positive DC coefficient.
-    info: json-able extras and "settings" (updated budgets).
+    info: json-able extras.
+    budgets: the inputs' `Budgets`, with those the strategy grew.
   """
 
   light: np.ndarray
   info: dict
+  budgets: Budgets
 
 
 class LightStrategy(NamedTuple):
@@ -93,7 +90,7 @@ class LightStrategy(NamedTuple):
 
   @property
   def label(self):
-    return LABELS.get(self.name, self.name)
+    return STRATEGIES[self.name].label if self.name in STRATEGIES else self.name
 
 
 def _rng(key):
@@ -102,7 +99,7 @@ def _rng(key):
 
 def _finish(xi, inputs, info=None):
   light = lights_lib.canonical_sign(lights_lib.on_sphere(xi, inputs.norm))
-  return LightChoice(light, dict(info or {}, settings=dict(inputs.settings)))
+  return LightChoice(light, dict(info or {}), inputs.budgets)
 
 
 def random_light(inputs: LightInputs, key) -> LightChoice:
@@ -153,12 +150,11 @@ def ours_light(inputs: LightInputs, key) -> LightChoice:
   start = np.zeros(n)
   start[j] = inputs.norm
   result = opt_lib.ascend(inputs.model, inputs.cameras, inputs.z, start, opt=inputs.ascent,
-                          settings=inputs.settings.get("ascent") or inputs.settings["u"])
+                          settings=inputs.budgets.first("ascent", "u"))
   info = {"one_hot": j, "u_one_hot": u_one_hot, "u_start": float(result.values[0]),
           "u_end": result.value, "values": result.values.tolist()}
-  choice = _finish(result.light, inputs._replace(
-      settings=dict(inputs.settings, ascent=result.settings)), info)
-  return choice
+  return _finish(result.light,
+                 inputs._replace(budgets=inputs.budgets.replace(ascent=result.settings)), info)
 
 
 def ours_exact_light(inputs: LightInputs, key) -> LightChoice:
@@ -168,12 +164,33 @@ def ours_exact_light(inputs: LightInputs, key) -> LightChoice:
   return _finish(vector, inputs, {"top_eigenvalue": value})
 
 
-_SELECT = {"random": random_light, "sobol": sobol_light, "orthogonal": orthogonal_light,
-           "ours": ours_light, "ours_exact": ours_exact_light}
+class LightStrategySpec(NamedTuple):
+  """A registered light strategy: its label, its function and its random stream
+  (`mfsample.streams`: fixed with the strategy, not its place in the registry)."""
+
+  label: str
+  select: Callable[[LightInputs, jax.Array], LightChoice]
+  stream: int
+
+
+STRATEGIES = {
+    "random": LightStrategySpec("Random", random_light, 0),
+    "sobol": LightStrategySpec("Sobol", sobol_light, 1),
+    "orthogonal": LightStrategySpec("Orthogonal random", orthogonal_light, 2),
+    "ours": LightStrategySpec("Ours", ours_light, 3),
+    "ours_exact": LightStrategySpec("Ours (exact)", ours_exact_light, 4),
+}
+streams.check_streams(STRATEGIES, "light strategies")
+NAMES = tuple(STRATEGIES)
 
 
 def make_light_strategy(name) -> LightStrategy:
   """The strategy `name` (one of `NAMES`)."""
-  if name not in _SELECT:
+  if name not in STRATEGIES:
     raise ValueError(f"unknown light strategy {name!r}; known: {', '.join(NAMES)}")
-  return LightStrategy(name, _SELECT[name])
+  return LightStrategy(name, STRATEGIES[name].select)
+
+
+def strategy_key(seed, name, index):
+  """The PRNG key of strategy `name` choosing light number `index` for `seed`."""
+  return streams.stream_key(seed, STRATEGIES[name].stream, index)

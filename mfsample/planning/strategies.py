@@ -1,5 +1,8 @@
 """Next-view strategies behind one interface: (model, training cameras, candidates) -> camera.
 
+`STRATEGIES` is the registry: every strategy's name, label, maker and random stream, read
+by the config's validator, the tables and the docs.
+
 A `Strategy` names the model it needs (`model_kind`: None, "stochastic" (the rounds'
 sampler), a sampler kind ("lowrank", "diagonal", "block"), "deterministic" or "variance"),
 whether it may propose poses outside the candidate pool (`new_poses`: such a pose must then
@@ -27,28 +30,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from mfsample import streams
 from mfsample import uncertainty as unc
 from mfsample.baselines import acp, activenerf, fisher
 from mfsample.camera import Camera
 from mfsample.planning import optimize, poses
 from mfsample.renderer import RenderSettings
+from mfsample.renderer.budget import Budgets
 from mfsample.sharding import default_num_devices
-
-LABELS = {
-    "random": "Random",
-    "farthest": "Farthest Point",
-    "activenerf": "ActiveNeRF",
-    "fisher": "FisherRF",
-    "acp": "ACP",
-    "ours_sel": "Ours (Sel.)",
-    "ours_opt_sel": "Ours (Opt. Sel.)",
-    "ours_opt_rnd": "Ours (Opt. Rnd.)",
-    "ours_opt_best": "Ours (Opt. Best)",
-}
-NAMES = tuple(LABELS)
-# The rows of the paper's Table 1 (and random): what the main job runs. Ours (Opt. Best) is
-# our variant, run by the configs that name it.
-TABLE1_NAMES = tuple(n for n in NAMES if n != "ours_opt_best")
 
 
 class Inputs(NamedTuple):
@@ -63,8 +52,9 @@ class Inputs(NamedTuple):
     sphere: `poses.SphereSpec` of the camera sphere.
     bounds: (low [3], high [3]) scene box.
     background: RGB tuple.
-    settings: {purpose: `RenderSettings`} budgets that sufficed before ("score",
-      "optimize"); missing entries start from a small budget and grow.
+    budgets: `Budgets` that sufficed before (`score`, `optimize`); unknown ones start from
+      `start` and grow.
+    start: `RenderSettings` of a first render (the round models' renderer, a small budget).
     max_views: the protocol's largest number of views: per-view arrays are padded to it so
       that one compilation serves every round (None: no padding).
   """
@@ -76,7 +66,8 @@ class Inputs(NamedTuple):
   sphere: poses.SphereSpec
   bounds: tuple
   background: tuple
-  settings: dict
+  budgets: Budgets = Budgets()
+  start: RenderSettings | None = None
   max_views: int | None = None
 
 
@@ -87,13 +78,15 @@ class Choice(NamedTuple):
     index: index into the candidate pool, or None for a new pose.
     camera: the chosen unbatched `Camera`.
     score: the strategy's score of the choice (U, Fisher score, gain, ...; nan if none).
-    info: extras: "settings" (updated budgets), "scores" [C], "trajectory", ...
+    info: extras: "scores" [C], "trajectory", ...
+    budgets: the inputs' `Budgets`, with those the strategy grew.
   """
 
   index: int | None
   camera: Camera
   score: float
   info: dict
+  budgets: Budgets = Budgets()
 
 
 class Strategy(NamedTuple):
@@ -106,7 +99,7 @@ class Strategy(NamedTuple):
 
   @property
   def label(self):
-    return LABELS.get(self.name, self.name)
+    return STRATEGIES[self.name].label if self.name in STRATEGIES else self.name
 
 
 # Budgets start small and grow to the next power of two that holds every render: a forward
@@ -117,8 +110,8 @@ _START = RenderSettings(max_intersections=1 << 12)
 
 def _settings(inputs, purpose):
   """The settings that sufficed for `purpose` last time, else the caller's starting settings
-  ("start": the round models' renderer, with a small budget), else `_START`."""
-  return inputs.settings.get(purpose) or inputs.settings.get("start") or _START
+  (the round models' renderer, with a small budget), else `_START`."""
+  return inputs.budgets.first(purpose) or inputs.start or _START
 
 
 def _small(cameras, cfg):
@@ -126,16 +119,16 @@ def _small(cameras, cfg):
   return poses.downscale_camera(cameras, int(cfg.get("score_downscale", 1)))
 
 
-def _pick(inputs, scores, extra=None, settings=None):
-  """The available candidate with the highest score."""
+def _pick(inputs, scores, extra=None, **grown):
+  """The available candidate with the highest score (`grown`: budgets that sufficed)."""
   scores = np.asarray(scores, np.float64)
   masked = np.where(inputs.available, scores, -np.inf)
   if not np.any(np.isfinite(masked)):
     raise ValueError("no candidate left to select")
   i = int(np.argmax(masked))
-  info = {"scores": scores, "settings": dict(inputs.settings, **(settings or {}))}
+  info = {"scores": scores}
   info.update(extra or {})
-  return Choice(i, inputs.candidates[i], float(scores[i]), info)
+  return Choice(i, inputs.candidates[i], float(scores[i]), info, inputs.budgets.replace(**grown))
 
 
 def _rng(key):
@@ -212,7 +205,7 @@ def fisher_strategy(cfg) -> Strategy:
         num_probes=int(cfg.probes), train_probes=int(cfg.train_probes), reg=float(cfg.reg),
         groups=tuple(cfg.groups), num_devices=default_num_devices(len(inputs.available)),
         pad_to=inputs.max_views)
-    return _pick(inputs, out.values, settings={"score": settings})
+    return _pick(inputs, out.values, score=settings)
 
   return Strategy("fisher", "deterministic", False, select)
 
@@ -228,7 +221,7 @@ def activenerf_strategy(cfg) -> Strategy:
     scores, settings = activenerf.variance_scores(
         inputs.model, _small(inputs.candidates, cfg), settings=_settings(inputs, "score"),
         num_devices=default_num_devices(len(inputs.available)))
-    return _pick(inputs, scores, settings={"score": settings})
+    return _pick(inputs, scores, score=settings)
 
   return Strategy("activenerf", "variance", False, select)
 
@@ -274,9 +267,9 @@ def _optimise(inputs, uv0, cfg, opt_cfg, key):
   u_start, u_end = (float(v) for v in np.asarray(u_ends.values))
   info = {"trajectory": np.asarray(result.trajectory), "values": np.asarray(result.values),
           "uv": np.asarray(result.params), "uv0": np.asarray(uv0),
-          "u_start": u_start, "u_end": u_end,
-          "settings": dict(inputs.settings, optimize=result.settings, score=score_settings)}
-  return camera, u_end, info
+          "u_start": u_start, "u_end": u_end}
+  return camera, u_end, info, inputs.budgets.replace(optimize=result.settings,
+                                                     score=score_settings)
 
 
 def ours_sel_strategy(cfg) -> Strategy:
@@ -288,7 +281,7 @@ def ours_sel_strategy(cfg) -> Strategy:
   def select(inputs, key):
     del key
     scores, settings = _ours_scores(inputs, cfg)
-    return _pick(inputs, scores, settings={"score": settings})
+    return _pick(inputs, scores, score=settings)
 
   return Strategy("ours_sel", "stochastic", False, select)
 
@@ -305,21 +298,22 @@ def ours_opt_sel_strategy(cfg, opt_cfg) -> Strategy:
   sampler (the round model's sampler; "": the rounds' own).
   """
   def select(inputs, key):
-    _, camera, value, info = _optimise_from_selection(inputs, cfg, opt_cfg, key)
-    return Choice(None, camera, value, info)
+    _, camera, value, info, budgets = _optimise_from_selection(inputs, cfg, opt_cfg, key)
+    return Choice(None, camera, value, info, budgets)
 
   return Strategy("ours_opt_sel", _opt_model_kind(opt_cfg), True, select)
 
 
 def _optimise_from_selection(inputs, cfg, opt_cfg, key):
-  """Ours (Sel.)'s choice, and the ascent from it: (start `Choice`, camera, U, info)."""
+  """Ours (Sel.)'s choice, and the ascent from it: (start `Choice`, camera, U, info,
+  budgets)."""
   scores, settings = _ours_scores(inputs, cfg)
-  start = _pick(inputs, scores, settings={"score": settings})
+  start = _pick(inputs, scores, score=settings)
   uv0 = poses.camera_to_uv(start.camera, inputs.sphere.center)
-  camera, value, info = _optimise(inputs._replace(settings=start.info["settings"]), uv0,
-                                  cfg, opt_cfg, key)
+  camera, value, info, budgets = _optimise(inputs._replace(budgets=start.budgets), uv0, cfg,
+                                           opt_cfg, key)
   info.update(start_index=start.index, start_score=start.score, scores=scores)
-  return start, camera, value, info
+  return start, camera, value, info, budgets
 
 
 def visited_steps(num_steps, every):
@@ -341,19 +335,18 @@ def ours_opt_best_strategy(cfg, opt_cfg) -> Strategy:
   (ties keep the start).
   """
   def select(inputs, key):
-    start, _, _, info = _optimise_from_selection(inputs, cfg, opt_cfg, key)
+    start, _, _, info, budgets = _optimise_from_selection(inputs, cfg, opt_cfg, key)
     steps = visited_steps(len(info["trajectory"]) - 1, int(opt_cfg.best_every))
     visited = poses.spherical_camera(jnp.asarray(info["trajectory"][steps]), inputs.sphere)
-    u_visited, settings = _ours_scores(inputs._replace(settings=info["settings"]), cfg,
-                                       visited)
-    info.update(visited_steps=steps, u_visited=u_visited,
-                settings=dict(info["settings"], score=settings))
+    u_visited, settings = _ours_scores(inputs._replace(budgets=budgets), cfg, visited)
+    budgets = budgets.replace(score=settings)
+    info.update(visited_steps=steps, u_visited=u_visited)
     best = int(np.argmax(u_visited))
     if not u_visited[best] > start.score:
       info["kept_step"] = 0
-      return Choice(start.index, start.camera, start.score, info)
+      return Choice(start.index, start.camera, start.score, info, budgets)
     info["kept_step"] = int(steps[best])
-    return Choice(None, visited[best], float(u_visited[best]), info)
+    return Choice(None, visited[best], float(u_visited[best]), info, budgets)
 
   return Strategy("ours_opt_best", _opt_model_kind(opt_cfg), True, select)
 
@@ -363,26 +356,58 @@ def ours_opt_rnd_strategy(cfg, opt_cfg) -> Strategy:
   def select(inputs, key):
     uv0 = poses.random_uv(_rng(key), 1, inputs.sphere)[0]
     # Fresh z (resample_z) from a key derived from the start's: the start is unchanged.
-    camera, value, info = _optimise(inputs, uv0, cfg, opt_cfg, jax.random.fold_in(key, 1))
-    return Choice(None, camera, value, info)
+    camera, value, info, budgets = _optimise(inputs, uv0, cfg, opt_cfg,
+                                             jax.random.fold_in(key, 1))
+    return Choice(None, camera, value, info, budgets)
 
   return Strategy("ours_opt_rnd", _opt_model_kind(opt_cfg), True, select)
 
 
+class StrategySpec(NamedTuple):
+  """A registered strategy.
+
+  Attributes:
+    label: its name in tables and figures (the paper's row).
+    make: (the config's `strategy` block) -> `Strategy`.
+    stream: its random stream (`mfsample.streams`): fixed with the strategy, not its place.
+    table1: whether the main job runs it (a row of the paper's Table 1, or random).
+  """
+
+  label: str
+  make: Callable
+  stream: int
+  table1: bool = True
+
+
+STRATEGIES = {
+    "random": StrategySpec("Random", lambda s: random_strategy(), 0),
+    "farthest": StrategySpec("Farthest Point", lambda s: farthest_strategy(), 1),
+    "activenerf": StrategySpec("ActiveNeRF", lambda s: activenerf_strategy(s.activenerf), 2),
+    "fisher": StrategySpec("FisherRF", lambda s: fisher_strategy(s.fisher), 3),
+    "acp": StrategySpec("ACP", lambda s: acp_strategy(s.acp), 4),
+    "ours_sel": StrategySpec("Ours (Sel.)", lambda s: ours_sel_strategy(s.ours), 5),
+    "ours_opt_sel": StrategySpec("Ours (Opt. Sel.)",
+                                 lambda s: ours_opt_sel_strategy(s.ours, s.optimize), 6),
+    "ours_opt_rnd": StrategySpec("Ours (Opt. Rnd.)",
+                                 lambda s: ours_opt_rnd_strategy(s.ours, s.optimize), 7),
+    # Our variant, run by the configs that name it.
+    "ours_opt_best": StrategySpec("Ours (Opt. Best)",
+                                  lambda s: ours_opt_best_strategy(s.ours, s.optimize), 8,
+                                  table1=False),
+}
+streams.check_streams(STRATEGIES, "camera strategies")
+NAMES = tuple(STRATEGIES)
+# The rows of the paper's Table 1 (and random): what the main job runs.
+TABLE1_NAMES = tuple(name for name, spec in STRATEGIES.items() if spec.table1)
+
+
 def make_strategy(name, config) -> Strategy:
   """The strategy `name` (one of `NAMES`) with its settings from a planning config."""
-  s = config.strategy
-  makers = {
-      "random": lambda: random_strategy(),
-      "farthest": lambda: farthest_strategy(),
-      "acp": lambda: acp_strategy(s.acp),
-      "fisher": lambda: fisher_strategy(s.fisher),
-      "activenerf": lambda: activenerf_strategy(s.activenerf),
-      "ours_sel": lambda: ours_sel_strategy(s.ours),
-      "ours_opt_sel": lambda: ours_opt_sel_strategy(s.ours, s.optimize),
-      "ours_opt_rnd": lambda: ours_opt_rnd_strategy(s.ours, s.optimize),
-      "ours_opt_best": lambda: ours_opt_best_strategy(s.ours, s.optimize),
-  }
-  if name not in makers:
+  if name not in STRATEGIES:
     raise ValueError(f"unknown strategy {name!r}; known: {', '.join(NAMES)}")
-  return makers[name]()
+  return STRATEGIES[name].make(config.strategy)
+
+
+def strategy_key(seed, name, round_index):
+  """The PRNG key of strategy `name` choosing the view of round `round_index` for `seed`."""
+  return streams.stream_key(seed, STRATEGIES[name].stream, round_index)

@@ -6,6 +6,8 @@ was needed. These helpers turn that into new settings, growing the budget to the
 of two, so a jitted caller recompiles at most log2(need / budget) times.
 """
 
+from typing import NamedTuple
+
 import numpy as np
 
 from mfsample.renderer.settings import RenderSettings
@@ -62,3 +64,33 @@ def render_with_budget(render_fn, settings: RenderSettings, *args, max_budget=1 
           f"{what} needs {int(np.max(np.asarray(stats.num_padded)))} intersections, "
           f"more than max_budget={max_budget}")
     settings = grown
+
+
+class Budgets(NamedTuple):
+  """The render settings that sufficed for each purpose of a job (None: not known yet).
+
+  Budgets grow on overflow and are reused, so a later render of the same kind starts from
+  a budget that holds it (no regrowth, no recompilation). The record is immutable: whoever
+  grows a budget returns a new `Budgets` (`replace`), and the caller that owns the record
+  keeps the new one; nothing is updated in place behind another function's back.
+  """
+
+  score: RenderSettings | None = None  # candidate scoring: U, FisherRF, ActiveNeRF
+  optimize: RenderSettings | None = None  # the camera ascent's renders
+  landscape: RenderSettings | None = None  # U over the landscape's grid of cameras
+  eval: RenderSettings | None = None  # test evaluation of a model's mean
+  mean: RenderSettings | None = None  # mean renders of candidates (U against the error)
+  u: RenderSettings | None = None  # U over lights and its quadratic form Q
+  ascent: RenderSettings | None = None  # the light ascent's renders
+
+  def replace(self, **settings):
+    """A copy with the settings of some purposes replaced."""
+    return self._replace(**settings)
+
+  def first(self, *purposes, default=None):
+    """The settings of the first of `purposes` that is known, else `default`."""
+    for purpose in purposes:
+      value = getattr(self, purpose)
+      if value is not None:
+        return value
+    return default
