@@ -8,8 +8,8 @@ compiled first, then the timed calls alternate between them (one call of each pe
 so a slow spell of a shared machine lands on all of them; the medians over rounds and their
 ratios are reported.
 
-  PYTHONPATH=. python benchmarks/candidate_scoring.py
-  PYTHONPATH=. python benchmarks/candidate_scoring.py --resolution=200 --num_gaussians=10000 \
+  python benchmarks/candidate_scoring.py
+  python benchmarks/candidate_scoring.py --resolution=200 --num_gaussians=10000 \
       --out=workdirs/benchmarks/candidate_scoring_200.json
 """
 

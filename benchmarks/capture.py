@@ -1,8 +1,8 @@
 """Seconds per ground-truth capture per Mitsuba variant and samples per pixel (spp).
 
-  PYTHONPATH=. python benchmarks/capture.py                 # spp sweep + SH basis
-  PYTHONPATH=. python benchmarks/capture.py --pool          # + the default pool (150 views)
-  PYTHONPATH=. python benchmarks/capture.py --quick         # tiny, for a smoke test
+  python benchmarks/capture.py                 # spp sweep + SH basis
+  python benchmarks/capture.py --pool          # + the default pool (150 views)
+  python benchmarks/capture.py --quick         # tiny, for a smoke test
 
 For each variant (scalar_rgb always; llvm_ad_rgb when it can render here, which needs
 libllvm19 on Debian) one untimed capture pays for the scene build and, for llvm, kernel

@@ -22,7 +22,7 @@ built-in default scene at 64 x 64 with 100 candidates):
   size; rho per case, then the mean over cases and each post-hoc row minus joint, paired by
   case (mean, standard error, cases above).
 
-  PYTHONPATH=. python benchmarks/posthoc_uncertainty.py --out=workdirs/posthoc_uncertainty.json
+  python benchmarks/posthoc_uncertainty.py --out=workdirs/posthoc_uncertainty.json
 """
 
 import itertools
@@ -58,24 +58,25 @@ def _farthest_views(pool, config, seed, num_views):
 
   config = config.copy_and_resolve_references()
   config.max_views = num_views
-  return runner.plan_views(strategies.make_strategy("farthest", config), pool, config, seed,
-                           runner.Trainer(config, pool), budgets={})
+  selected, _ = runner.plan_views(strategies.make_strategy("farthest", config), pool, config,
+                                  seed, runner.Trainer(config, pool))
+  return selected
 
 
 def run():
   import jax
   import numpy as np
 
-  from configs import camera_planning
   from mfsample import uncertainty as unc
   from mfsample.data.ply import export_ply
   from mfsample.planning import runner
+  from mfsample.planning.config import get_config as planning_config
   from mfsample.planning.pool import make_pool
   from mfsample.planning.u_error import u_against_error
   from mfsample.train.posthoc import fit_spread
 
   comp = _COMPARISON.value
-  config = camera_planning.get_config(comp.planning_variant)
+  config = planning_config(comp.planning_variant)
   config.data.progress = False
   pool = make_pool(config.data)
   trainer = runner.Trainer(config, pool)

@@ -197,15 +197,15 @@ def run_step(repeats, variant):
   import jax
   import jax.numpy as jnp
 
-  from configs import train_lego
   from mfsample import RenderSettings, render
   from mfsample.data import datasets as data_lib
   from mfsample.model import mean_gaussians
   from mfsample.renderer.budget import fit_budget, render_with_budget
   from mfsample.train import loop
+  from mfsample.train.config import get_config
   from mfsample.train.step import make_train_step
 
-  config = train_lego.get_config()
+  config = get_config("lego")
   config.model.init_points = _STEP_POINTS.value
   config.data.path = _DATA.value
   config.data.downscale = max(800 // _STEP_SIZE.value, 1)
@@ -234,7 +234,7 @@ def run_step(repeats, variant):
   view = jnp.int32(0)
 
   def one_step():
-    return fn(state, views.images, views.cameras, view, setup.sobol[:m])
+    return fn(state, (views.images, views.cameras), view, setup.sobol[:m])
 
   while True:  # grow the budget as the training loop does
     _, metrics = one_step()

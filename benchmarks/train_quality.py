@@ -8,7 +8,7 @@ resume from their checkpoints, so a killed benchmark continues where it stopped;
 variants are only collected. A workdir made with another config is refused, naming the
 fields that differ.
 
-  PYTHONPATH=. python benchmarks/train_quality.py --size=100 --steps=5000
+  python benchmarks/train_quality.py --size=100 --steps=5000
 
 Variants: "deterministic"; "rank2", the lego config's schedule (samples until the first
 opacity reset at step 3000, then the mean, as the authors' code); "rank2_every_step", a
@@ -48,9 +48,9 @@ _EXTRA = flags.DEFINE_list("extra", [], "More config fields for every variant, a
 
 def lego_config(data, size, steps):
   """The lego training config at `size` x `size` (downscale 400 / size) for `steps` steps."""
-  from configs import train
+  from mfsample.train.config import get_config
 
-  config = train.get_config("lego")
+  config = get_config("lego")
   config.data.path = data
   config.data.downscale = max(400 // size, 1)
   config.train.num_steps = steps
@@ -112,9 +112,9 @@ def train_variant(config, workdir):
   Returns:
     {field: value} for `ROW_FIELDS` from the run's `metrics.json`.
   """
-  from mfsample.planning.workdirs import differences
   from mfsample.train import checkpoint as ckpt
   from mfsample.train import train_and_evaluate
+  from mfsample.workdir import differences
 
   new = _comparable(json.loads(config.to_json_best_effort()))
   config_path = os.path.join(workdir, "config.json")

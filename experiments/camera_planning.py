@@ -10,25 +10,8 @@ workdir whose runs used another protocol is refused, and nothing is written befo
 is validated (docs/reliability.md).
 """
 
-from absl import app, flags
-from ml_collections import config_flags
-
-from mfsample.planning import run_camera_planning
-
-_CONFIG = config_flags.DEFINE_config_file("config", None, "Planning config file.",
-                                          lock_config=True)
-_WORKDIR = flags.DEFINE_string("workdir", None, "Output directory.")
-flags.mark_flags_as_required(["config", "workdir"])
-
-
-def main(argv):
-  if len(argv) > 1:
-    raise app.UsageError(f"Unexpected arguments: {argv[1:]}")
-  results = run_camera_planning(_CONFIG.value, _WORKDIR.value)
-  with open(f"{_WORKDIR.value}/table.md") as f:
-    print(f.read())
-  print(f"wall-clock of this call: {results['seconds_this_call']:.0f} s")
-
+from mfsample import jobs
+from mfsample.planning.runner import JOB
 
 if __name__ == "__main__":
-  app.run(main)
+  jobs.main(JOB)

@@ -8,25 +8,8 @@ Running again on the same workdir resumes: finished strategies are loaded, an in
 one restarts at its last finished light.
 """
 
-from absl import app, flags
-from ml_collections import config_flags
-
-from mfsample.lighting import run_light_planning
-
-_CONFIG = config_flags.DEFINE_config_file("config", None, "Light-planning config file.",
-                                          lock_config=True)
-_WORKDIR = flags.DEFINE_string("workdir", None, "Output directory.")
-flags.mark_flags_as_required(["config", "workdir"])
-
-
-def main(argv):
-  if len(argv) > 1:
-    raise app.UsageError(f"Unexpected arguments: {argv[1:]}")
-  results = run_light_planning(_CONFIG.value, _WORKDIR.value)
-  with open(f"{_WORKDIR.value}/table.md") as f:
-    print(f.read())
-  print(f"wall-clock of this call: {results['seconds_this_call']:.0f} s")
-
+from mfsample import jobs
+from mfsample.lighting.protocol import JOB
 
 if __name__ == "__main__":
-  app.run(main)
+  jobs.main(JOB)

@@ -9,28 +9,40 @@ that raises leaves no temporary file behind.
 import contextlib
 import json
 import os
+import tempfile
 
 
 @contextlib.contextmanager
 def atomic_path(path):
   """Yields a temporary path beside `path`; on success it replaces `path` atomically.
 
-  The temporary name keeps the extension ("table.tmp.md"), so writers that choose the
-  format by extension (matplotlib, imageio, numpy) write the intended format. The folder of
-  `path` is created if missing.
+  The temporary name is unique (two writers never share one) and keeps the extension
+  ("table.md" -> "table.md.x1y2.tmp.md"), so writers that choose the format by extension
+  (matplotlib, imageio, numpy) write the intended format. The folder of `path` is created if
+  missing. A write that fails (a full disk, a read-only folder) raises `OSError` naming
+  `path`, and leaves no temporary file behind.
 
     with atomic_path("out/cameras.png") as tmp:
       fig.savefig(tmp)
   """
   path = os.fspath(path)
-  os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
-  root, ext = os.path.splitext(path)
-  tmp = f"{root}.tmp{ext}"
+  folder = os.path.dirname(path) or "."
+  try:
+    os.makedirs(folder, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=folder, prefix=os.path.basename(path) + ".",
+                               suffix=".tmp" + os.path.splitext(path)[1])
+    os.close(fd)
+  except OSError as e:
+    raise OSError(e.errno, f"cannot write {path}: {e.strerror}", path) from e
   try:
     yield tmp
     with open(tmp, "rb+") as f:  # flushed before the rename: no empty file after a crash
       os.fsync(f.fileno())
     os.replace(tmp, path)
+  except OSError as e:
+    if e.filename not in (None, tmp):  # an error about another file: the writer's own
+      raise
+    raise OSError(e.errno, f"cannot write {path}: {e.strerror}", path) from e
   finally:
     if os.path.exists(tmp):
       os.remove(tmp)

@@ -156,3 +156,13 @@ def _bounds_text(minimum, maximum):
   if maximum is not None:
     return f" <= {maximum}"
   return ""
+
+
+def with_variants(config, variant, variants, where):
+  """`config` changed by the comma-separated `variant` names, in order (`variants`: {name:
+  function(config)}); `where` names the config file in the error for an unknown name."""
+  for name in filter(None, (v.strip() for v in str(variant).split(","))):
+    if name not in variants:
+      raise ValueError(f"unknown variant {name!r} of {where}; known: {', '.join(variants)}")
+    variants[name](config)
+  return config

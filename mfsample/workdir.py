@@ -1,4 +1,4 @@
-"""The resume guard shared by the experiments: a workdir holds the results of one config.
+"""A workdir holds the results of one config, written by one process at a time.
 
 An experiment writes its config as `config.json` beside its results. A later call on the
 same workdir (to resume a killed run, or to add seeds) compares its own config with that
@@ -9,10 +9,22 @@ different configs never end up in one table, and nothing is overwritten by mista
   check_same_config(config, workdir, free_fields=...,
                     has_results=holds_results(workdir, "runs"))  # before any write
   write_config(config, workdir)                                        # then record it
+
+Two processes on one workdir would mix or overwrite each other's results, so a run holds
+the workdir's lock (`locked`) from before the guard until it ends: a second process is
+refused, naming the holder. The lock is the kernel's (`fcntl.flock` on `workdir/.lock`): it
+goes with the process however the process ends, so a lock file left by a killed run is
+taken over (with a warning naming that run).
 """
 
+import contextlib
+import datetime
+import errno
+import fcntl
 import json
 import os
+import socket
+import warnings
 
 from mfsample._json import without_fields, write_text
 
@@ -106,3 +118,81 @@ def check_same_config(config, workdir, *, free_fields=(), has_results=True, resu
 def write_config(config, workdir):
   """Writes `workdir/config.json` atomically (after `check_same_config`)."""
   write_text(os.path.join(workdir, CONFIG_FILE), config.to_json_best_effort(indent=2))
+
+
+LOCK_FILE = ".lock"
+
+
+class WorkdirBusyError(RuntimeError):
+  """Another process holds the workdir (the message names it)."""
+
+
+def _holder(path):
+  """What a lock file says of the process that wrote it ("" when unreadable)."""
+  try:
+    with open(path, encoding="utf-8") as f:
+      info = json.load(f)
+    return (f"process {info['pid']} on {info['host']} ({info.get('what', 'a run')}, "
+            f"started {info['started']})")
+  except (OSError, ValueError, KeyError, TypeError):
+    return ""
+
+
+@contextlib.contextmanager
+def locked(workdir, what="a run"):
+  """Holds `workdir`'s lock for the block: one writer per workdir.
+
+  Creates `workdir` if needed (and removes it again if the block leaves it empty, so that a
+  refused call leaves no trace).
+
+  Args:
+    workdir: the folder.
+    what: the holder's description in the message another process gets ("camera planning").
+
+  Raises:
+    WorkdirBusyError: a live process holds it (naming the process, its host and its job).
+  """
+  created = not os.path.isdir(workdir)
+  os.makedirs(workdir, exist_ok=True)
+  path = os.path.join(workdir, LOCK_FILE)
+  while True:
+    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+      fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError as e:
+      if e.errno in (errno.ENOLCK, errno.EOPNOTSUPP, errno.ENOSYS):
+        warnings.warn(f"{workdir}: its file system has no locks; a second process on it "
+                      "would not be detected", stacklevel=3)
+        break
+      os.close(fd)
+      if e.errno not in (errno.EAGAIN, errno.EACCES):
+        raise
+      holder = _holder(path) or "another process"
+      raise WorkdirBusyError(
+          f"{workdir} is in use by {holder}: wait for it to end, or use another "
+          "--workdir") from None
+    # The file may have been removed and recreated by a releasing holder between our open and
+    # our lock: then our lock is on a file nobody else sees; start again.
+    try:
+      same = os.fstat(fd).st_ino == os.stat(path).st_ino
+    except FileNotFoundError:
+      same = False
+    if same:
+      break
+    os.close(fd)
+  stale = _holder(path)
+  if stale:
+    warnings.warn(f"{workdir}: taking over from {stale}, which ended without releasing it",
+                  stacklevel=3)
+  info = {"pid": os.getpid(), "host": socket.gethostname(), "what": what,
+          "started": datetime.datetime.now().isoformat(timespec="seconds")}
+  os.ftruncate(fd, 0)
+  os.write(fd, json.dumps(info).encode("utf-8"))
+  os.fsync(fd)
+  try:
+    yield
+  finally:
+    os.remove(path)  # while still held: the next holder finds no stale record
+    os.close(fd)
+    if created and not os.listdir(workdir):
+      os.rmdir(workdir)

@@ -25,7 +25,7 @@ from planning_testlib import random_model
 from test_train import resume_config
 
 from configs import camera_planning
-from mfsample import _json, config_checks, samplers
+from mfsample import _json, config_checks, jobs, samplers
 from mfsample import uncertainty as unc
 from mfsample._pytree import replace
 from mfsample.camera import Camera, InvalidCameraError
@@ -39,8 +39,9 @@ from mfsample.renderer import RenderSettings, render
 from mfsample.scenes import cache
 from mfsample.testing import orbit_camera, random_gaussians
 from mfsample.train import checkpoint as ckpt
-from mfsample.train import loop
+from mfsample.train import experiment, loop
 from mfsample.train.config import validate as validate_training
+from mfsample.train.experiment import train_and_evaluate
 from mfsample.workdir import WorkdirError
 
 NAN = float("nan")
@@ -394,7 +395,7 @@ def test_train_and_evaluate_writes_nothing_for_a_bad_call(tmp_path, case, error,
     shutil.rmtree(workdir)
   before = _tree_files(tmp_path)
   with pytest.raises(error, match=message):
-    loop.train_and_evaluate(config, workdir)
+    train_and_evaluate(config, workdir)
   assert _tree_files(tmp_path) == before
 
 
@@ -405,13 +406,13 @@ def test_the_workdir_guard_lets_speed_and_bookkeeping_fields_differ(tmp_path):
   config.train.checkpoint_every = 7
   config.train.keep_checkpoints = 5
   config.train.progress = True
-  loop.check_workdir(config, str(tmp_path))  # the same results, written differently
+  jobs.check_workdir(experiment.JOB, config, str(tmp_path))  # the same results, written otherwise
   config.train.log_every = 3
   with pytest.raises(WorkdirError, match=r"differences: train.log_every\)"):
-    loop.check_workdir(config, str(tmp_path))
+    jobs.check_workdir(experiment.JOB, config, str(tmp_path))
   # A config.json with nothing computed from it is simply replaced.
   os.remove(tmp_path / "checkpoints" / "ckpt_00000008.npz")
-  loop.check_workdir(config, str(tmp_path))
+  jobs.check_workdir(experiment.JOB, config, str(tmp_path))
 
 
 # ====================================================================== checkpoints
@@ -521,11 +522,11 @@ def test_training_killed_between_its_result_files_resumes(tiny_dataset, straight
 
   monkeypatch.setattr(eval_lib, "evaluate", killed)
   with pytest.raises(KeyboardInterrupt):
-    loop.train_and_evaluate(config, workdir)
+    train_and_evaluate(config, workdir)
   assert os.path.exists(os.path.join(workdir, "train_log.json"))
   assert not os.path.exists(os.path.join(workdir, "metrics.json"))
   monkeypatch.setattr(eval_lib, "evaluate", evaluate)
-  resumed = loop.train_and_evaluate(config, workdir)
+  resumed = train_and_evaluate(config, workdir)
   for x, y in zip(jax.tree.leaves(straight.state), jax.tree.leaves(resumed), strict=True):
     np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
   metrics_path = os.path.join(workdir, "metrics.json")
@@ -541,7 +542,7 @@ def test_training_killed_between_its_result_files_resumes(tiny_dataset, straight
 
   monkeypatch.setattr(os, "replace", dies_on_metrics)
   with pytest.raises(KeyboardInterrupt):
-    loop.train_and_evaluate(config, workdir)
+    train_and_evaluate(config, workdir)
   assert open(metrics_path).read() == metrics  # the previous file, whole
   assert not [n for n in os.listdir(workdir) if ".tmp" in n]
 
@@ -709,6 +710,18 @@ def test_planning_killed_between_its_result_files_resumes(planned, tmp_path, mon
   resumed = runner.run_camera_planning(_planning_config(), str(tmp_path / "run"))
   assert _comparable(resumed) == _comparable(reference)
   assert (tmp_path / "run" / "table.md").read_text() == (workdir / "table.md").read_text()
+
+
+@pytest.mark.slow
+def test_a_damaged_run_record_is_reported_and_computed_again(planned, tmp_path):
+  reference, workdir = planned
+  shutil.copytree(workdir, tmp_path / "run")
+  record = tmp_path / "run" / "runs" / "farthest-seed0.json"
+  record.write_text(record.read_text()[:100])  # truncated by a crash of another tool
+  with pytest.warns(UserWarning, match=r"farthest-seed0\.json is damaged"):
+    resumed = runner.run_camera_planning(_planning_config(), str(tmp_path / "run"))
+  assert _comparable(resumed) == _comparable(reference)
+  assert json.loads(record.read_text())["strategy"] == "farthest"
 
 
 def test_planning_refuses_a_workdir_of_another_protocol(planned, tmp_path):

@@ -20,8 +20,10 @@ from mfsample import config_checks
 from mfsample.lighting import captures, field, lights, protocol, strategies, training
 from mfsample.lighting import optimize as opt_lib
 from mfsample.lighting import uncertainty as lu
+from mfsample.lighting.config import validate as validate_lighting
 from mfsample.model import SamplerSpec
 from mfsample.renderer import RenderSettings
+from mfsample.renderer.budget import Budgets
 from mfsample.uncertainty import uncertainty_z
 
 N = 4  # light coefficients of the tiny variant
@@ -183,7 +185,7 @@ def _inputs(model, used):
       model=model, cameras=cameras(), z=z, q=np.asarray(gram.q, np.float64),
       used=np.asarray(used), index=len(used), norm=lights.UNIFORM_NORM,
       ascent=opt_lib.AscentSettings(steps=40, lr=0.3, final_lr=0.01),
-      settings={"u": SETTINGS})
+      budgets=Budgets(u=SETTINGS))
 
 
 @pytest.mark.slow
@@ -265,7 +267,7 @@ def test_the_config_file_loads_from_the_command_line(variant):
   config = fv.config
   assert config.num_lights == 4 and config.planning.ascent_steps == 7
   assert config.data.kind == {"": "scene", "tiny": "synthetic"}[variant]
-  protocol.check_config(config)
+  validate_lighting(config)
   with pytest.raises(AttributeError):
     config.num_light = 3  # locked: typos are errors
   with pytest.raises(ValueError, match="unknown variant 'huge'"):
@@ -276,15 +278,15 @@ def test_the_config_is_checked_on_entry_naming_the_field():
   config = tiny()
   config.num_lights = 6  # > n = 4 with the orthogonal strategy
   with pytest.raises(config_checks.ConfigError, match="config.num_lights = 6"):
-    protocol.check_config(config)
+    validate_lighting(config)
   config = tiny()
   config.strategies = ("ours", "best")
   with pytest.raises(config_checks.ConfigError, match="config.strategies: 'best'"):
-    protocol.check_config(config)
+    validate_lighting(config)
   config = tiny()
   config.planning.ascent_final_lr = 1.0
   with pytest.raises(config_checks.ConfigError, match="planning.ascent_final_lr"):
-    protocol.check_config(config)
+    validate_lighting(config)
 
 
 # ------------------------------------------------------------------ training

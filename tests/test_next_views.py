@@ -11,9 +11,9 @@ import pytest
 from absl import flags
 from ml_collections import config_flags
 
-from configs import uncertainty as uncertainty_configs
+from configs import next_views as next_views_configs
 from mfsample.config_checks import ConfigError
-from mfsample.next_views import run_uncertainty, sphere_candidates, top_k
+from mfsample.next_views import run_next_views, sphere_candidates, top_k
 from mfsample.next_views.candidates import capture_up
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
@@ -22,7 +22,7 @@ ROOT = pathlib.Path(__file__).resolve().parents[1]
 @pytest.fixture(scope="module")
 def joint_run(tmp_path_factory):
   workdir = str(tmp_path_factory.mktemp("joint"))
-  return workdir, run_uncertainty(uncertainty_configs.get_config("tiny"), workdir)
+  return workdir, run_next_views(next_views_configs.get_config("tiny"), workdir)
 
 
 @pytest.mark.slow
@@ -46,15 +46,15 @@ def test_tiny_job_trains_maps_and_proposes(joint_run):
 @pytest.mark.slow
 def test_tiny_job_resumes_and_refuses_another_config(joint_run):
   workdir, results = joint_run
-  config = uncertainty_configs.get_config("tiny")
-  assert run_uncertainty(config, workdir) == results  # finished: read back, nothing redone
+  config = next_views_configs.get_config("tiny")
+  assert run_next_views(config, workdir) == results  # finished: read back, nothing redone
   os.remove(os.path.join(workdir, "results.json"))  # killed after training: resumes there
-  again = run_uncertainty(config, workdir)
+  again = run_next_views(config, workdir)
   assert again["steps"] == 40 and again["top_k"] == results["top_k"]
   config.next_views.k = 3
   config.train.progress = True  # presentation only: not a difference
   with pytest.raises(ValueError, match=r"different config \(differences: next_views.k\)"):
-    run_uncertainty(config, workdir)
+    run_next_views(config, workdir)
 
 
 @pytest.mark.slow
@@ -65,7 +65,7 @@ def test_colmap_capture_and_a_ply_get_posthoc_uncertainty(joint_run, tmp_path):
   from mfsample.data import datasets as data_lib
   from mfsample.data.ply import load_ply
 
-  config = uncertainty_configs.get_config("tiny")
+  config = next_views_configs.get_config("tiny")
   dataset = data_lib.load_dataset(config.data)
   both = dataset.train.subset(range(12)).replace(names=())
   xyz = np.asarray(synthetic.synthetic_gaussians(config.data.synthetic.num_gaussians, 0).means)
@@ -79,7 +79,7 @@ def test_colmap_capture_and_a_ply_get_posthoc_uncertainty(joint_run, tmp_path):
   config.views.train_every = 1
   config.next_views.candidates = "sphere"
   workdir = str(tmp_path / "posthoc")
-  results = run_uncertainty(config, workdir)
+  results = run_next_views(config, workdir)
   assert results["kind"] == "posthoc" and results["steps"] == 6
   assert results["num_train_views"] == 9 and results["num_test_views"] == 3
   assert results["next_views"]["num_candidates"] == 6
@@ -98,23 +98,23 @@ def test_config_is_checked_before_anything_is_written(tmp_path):
       ("sampler.kind", "deterministic", "config.sampler.kind = 'deterministic'"),
       ("views.train_every", 1, "config.views.train_every = 1 trains on every view"),
       ("data.kind", "nerf", "config.data.kind = 'nerf'")]:
-    config = uncertainty_configs.get_config("tiny")
+    config = next_views_configs.get_config("tiny")
     node, leaf = config, field.split(".")
     for part in leaf[:-1]:
       node = node[part]
     node[leaf[-1]] = value
     with pytest.raises(ConfigError, match=message.replace("(", r"\(")):
-      run_uncertainty(config, str(tmp_path / "w"))
-  config = uncertainty_configs.get_config("tiny")
+      run_next_views(config, str(tmp_path / "w"))
+  config = next_views_configs.get_config("tiny")
   config.posthoc.ply = str(tmp_path / "missing.ply")
   with pytest.raises(FileNotFoundError, match="config.posthoc.ply"):
-    run_uncertainty(config, str(tmp_path / "w"))
+    run_next_views(config, str(tmp_path / "w"))
   assert not os.path.exists(tmp_path / "w")
 
 
 @pytest.mark.parametrize("variant", ["", "tiny", "colmap,posthoc"])
 def test_variants_load_from_the_command_line(variant):
-  spec = f"uncertainty.py:{variant}" if variant else "uncertainty.py"
+  spec = f"next_views.py:{variant}" if variant else "next_views.py"
   argv = ["prog", f"--config={ROOT / 'configs' / spec}", "--config.next_views.k=7",
           "--config.posthoc.ply=model.ply"]
   fv = flags.FlagValues()
@@ -125,7 +125,7 @@ def test_variants_load_from_the_command_line(variant):
   assert fv.config.data.kind == {"": "scene", "tiny": "synthetic", "colmap,posthoc": "colmap"}[
       variant]
   with pytest.raises(ValueError, match="unknown variant"):
-    uncertainty_configs.get_config("huge")
+    next_views_configs.get_config("huge")
 
 
 def test_sphere_candidates_follow_the_capture():
@@ -149,12 +149,12 @@ def test_sphere_candidates_follow_the_capture():
 
 
 def test_a_workdir_whose_call_failed_early_is_taken_over(tmp_path):
-  config = uncertainty_configs.get_config("tiny")
+  config = next_views_configs.get_config("tiny")
   config.data.kind = "colmap"
   config.data.path = str(tmp_path / "typo")
   workdir = str(tmp_path / "w")
   with pytest.raises(FileNotFoundError, match="typo"):
-    run_uncertainty(config, workdir)
+    run_next_views(config, workdir)
   config.data.path = str(tmp_path / "still_missing")  # a new config, nothing computed yet
   with pytest.raises(FileNotFoundError, match="still_missing"):
-    run_uncertainty(config, workdir)
+    run_next_views(config, workdir)

@@ -14,7 +14,7 @@ import scipy.linalg
 from conftest import float64
 from planning_testlib import tiny_config, tiny_pool, trained_one_view
 
-from mfsample import RenderSettings
+from mfsample import RenderSettings, jobs
 from mfsample import uncertainty as unc
 from mfsample.baselines import activenerf
 from mfsample.planning import (
@@ -23,7 +23,6 @@ from mfsample.planning import (
   runner,
   strategies,
   tables,
-  workdirs,
 )
 from mfsample.planning.pool import stack_cameras
 from mfsample.scenes import get_scene
@@ -132,7 +131,7 @@ def _inputs(pool, config, model, views=(0, 3)):
   available[list(views)] = False
   return strategies.Inputs(model, stack_cameras([pool.candidates.cameras[i] for i in views]),
                            pool.candidates.cameras, available, pool.sphere, pool.bounds,
-                           pool.background, {}, config.max_views)
+                           pool.background, max_views=config.max_views)
 
 
 @pytest.mark.parametrize("name", strategies.NAMES)
@@ -214,7 +213,7 @@ def test_farthest_point_picks_the_farthest_candidate():
   strategy = strategies.make_strategy("farthest", tiny_config())
   inputs = strategies.Inputs(None, stack_cameras([pool.candidates.cameras[0]]),
                              pool.candidates.cameras, np.arange(8) != 0, pool.sphere,
-                             pool.bounds, pool.background, {})
+                             pool.bounds, pool.background)
   choice = strategy.select(inputs, jax.random.PRNGKey(0))
   d = np.linalg.norm(np.asarray(pool.candidates.cameras.center)
                      - np.asarray(pool.candidates.cameras.center)[0], axis=-1)
@@ -345,7 +344,7 @@ def test_final_models_densify_when_their_config_asks():
   live = int(np.asarray(model.mask).sum())
   assert t.model.init_points < live <= t.model.max_gaussians
   metrics, _ = mean_metrics(model, pool.test, background=pool.background,
-                              settings=trainer.settings["final"])
+                              settings=trainer.settings_of("final"))
   assert np.isfinite(metrics["psnr"])
 
 
@@ -361,10 +360,10 @@ def test_resume_guard_ignores_speed_only_fields(tmp_path):
   _workdir_with_a_run(tmp_path, json.loads(config.to_json_best_effort()))
   config.round_train.render.chunks_per_step = 64
   config.final_train.render.chunks_per_step = 256
-  workdirs.check_resumable(config, str(tmp_path))  # the same runs, only faster or slower
+  jobs.check_workdir(runner.JOB, config, str(tmp_path))  # the same runs, faster or slower
   config.final_train.render.tile_size = 8
   with pytest.raises(ValueError, match=r"differences: final_train\.render\.tile_size\)"):
-    workdirs.check_resumable(config, str(tmp_path))
+    jobs.check_workdir(runner.JOB, config, str(tmp_path))
 
 
 def test_table_layout_has_mean_and_std():

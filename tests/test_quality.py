@@ -13,7 +13,8 @@ from configs import uncertainty_quality
 from mfsample import config_checks
 from mfsample import uncertainty as unc
 from mfsample.planning import training
-from mfsample.quality import arc, benchmark, maps, run_uncertainty_quality, runner, tables
+from mfsample.quality import arc, benchmark, maps, run_uncertainty_quality, tables
+from mfsample.quality.config import validate as validate_quality
 from mfsample.renderer import RenderSettings, render
 
 
@@ -101,7 +102,7 @@ def test_bad_configs_are_refused_naming_the_field(field, value, message):
     node = node[p]
   node[leaf] = value
   with pytest.raises(config_checks.ConfigError, match=message):
-    runner.check_config(config)
+    validate_quality(config)
 
 
 @pytest.fixture(scope="module")

@@ -10,3 +10,30 @@ def test_write_json_leaves_no_temporary_file_and_makes_its_folder(tmp_path):
   write_json(str(path), {"a": [1, 2]})
   assert json.loads(path.read_text()) == {"a": [1, 2]}
   assert [p.name for p in path.parent.iterdir()] == ["out.json"]
+
+
+def test_a_failed_write_names_the_file_and_leaves_no_temporary(tmp_path):
+  import errno
+
+  import pytest
+
+  from mfsample._json import atomic_path
+
+  path = tmp_path / "out" / "table.md"
+  with pytest.raises(OSError, match=r"cannot write .*out/table\.md: No space left") as e:
+    with atomic_path(path) as tmp:
+      with open(tmp, "w") as f:
+        f.write("half a table")
+      raise OSError(errno.ENOSPC, "No space left on device")  # as a full disk would
+  assert e.value.errno == errno.ENOSPC and e.value.filename == str(path)
+  assert list((tmp_path / "out").iterdir()) == []
+
+
+def test_temporary_names_are_unique_and_keep_the_extension(tmp_path):
+  from mfsample._json import atomic_path
+
+  with atomic_path(tmp_path / "a.png") as one, atomic_path(tmp_path / "a.png") as two:
+    assert one != two and one.endswith(".png") and two.endswith(".png")
+    for t in (one, two):
+      with open(t, "w") as f:
+        f.write(t)

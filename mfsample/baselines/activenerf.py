@@ -31,11 +31,11 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
+from mfsample.mean_render import render_mean
 from mfsample.model import mean_gaussians
 from mfsample.renderer import RenderSettings, render
 from mfsample.renderer.budget import render_with_budget
 from mfsample.sharding import map_cameras
-from mfsample.train.evaluate import render_mean
 
 
 class VarianceModel(NamedTuple):

@@ -21,11 +21,11 @@ non-finite values, truncated data, and ASCII files (3DGS tools write binary; an 
 a real model is gigabytes of text, and far more often a mesh or point cloud saved by mistake).
 """
 
-import os
 from pathlib import Path
 
 import numpy as np
 
+from mfsample._json import atomic_path
 from mfsample.data._io import DatasetError, require_file
 
 # Properties every 3DGS file has, grouped as the model's raw parameters.
@@ -91,9 +91,9 @@ def write_ply(path, arrays):
   for name in names:
     table[name] = arrays[name]
   path = Path(path)
-  tmp = path.with_name(path.name + ".tmp")
-  plyfile.PlyData([plyfile.PlyElement.describe(table, "vertex")], byte_order="<").write(str(tmp))
-  os.replace(tmp, path)
+  with atomic_path(path) as tmp:
+    plyfile.PlyData([plyfile.PlyElement.describe(table, "vertex")],
+                    byte_order="<").write(str(tmp))
   return path
 
 

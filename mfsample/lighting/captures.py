@@ -71,12 +71,11 @@ def capture_many(basis, lights):
 
 
 def make_light_data(cfg, light_coeffs) -> LightData:
-  """The `LightData` of the `data` block of a light-planning config."""
-  if cfg.kind == "scene":
-    return _scene_data(cfg, light_coeffs)
-  if cfg.kind == "synthetic":
-    return _synthetic_data(cfg, light_coeffs)
-  raise ValueError(f"config.data.kind must be 'scene' or 'synthetic', got {cfg.kind!r}")
+  """The `LightData` of the `data` block of a light-planning config (`LIGHT_DATA_KINDS`)."""
+  if cfg.kind not in LIGHT_DATA_KINDS:
+    raise ValueError(f"config.data.kind must be one of {', '.join(map(repr, LIGHT_DATA_KINDS))}"
+                     f", got {cfg.kind!r}")
+  return LIGHT_DATA_KINDS[cfg.kind](cfg, light_coeffs)
 
 
 def _scene_data(cfg, n):
@@ -152,6 +151,11 @@ def _synthetic_data(cfg, n):
   r = float(s.radius) + 0.2
   return LightData("synthetic", train, test, basis_images(train), basis_images(test),
                    (np.full(3, -r), np.full(3, r)))
+
+
+# The kinds of light-planning data: a built-in Mitsuba scene's SH basis captures, or a
+# synthetic diffuse shell rendered by mfsample (no Mitsuba).
+LIGHT_DATA_KINDS = {"scene": _scene_data, "synthetic": _synthetic_data}
 
 
 def to_device_cameras(cameras):

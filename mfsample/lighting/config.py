@@ -19,7 +19,12 @@ the uniform light's (`mfsample.lighting.lights`).
 
 import ml_collections
 
+from mfsample import config_checks as cc
+from mfsample.lighting.captures import LIGHT_DATA_KINDS
+from mfsample.lighting.field import COEFFICIENT_COUNTS, group_shapes
 from mfsample.lighting.strategies import NAMES
+from mfsample.model import SAMPLER_KINDS
+from mfsample.train.config import validate_render
 
 
 def default_config():
@@ -177,3 +182,84 @@ def default_config():
   fig.sphere_height = 32  # Latitude samples of the U-over-directions map.
   fig.sphere_width = 64  # Longitude samples.
   return config
+
+
+def validate(config):
+  """Checks every field the protocol reads; `ConfigError` naming the field and its range."""
+  cc.check_int(config, "seed", minimum=0)
+  cc.check_sequence(config, "strategies", item_choices=NAMES, distinct=True)
+  n = cc.check_choice(config, "model.light_coeffs", COEFFICIENT_COUNTS[1:])
+  cc.check_choice(config, "model.out_coeffs", COEFFICIENT_COUNTS)
+  lights = cc.check_int(config, "num_lights", minimum=1)
+  if "orthogonal" in config.strategies and lights > n:
+    raise cc.ConfigError(f"config.num_lights = {lights}: the orthogonal strategy needs "
+                         f"num_lights <= model.light_coeffs = {n} (a new direction per light)")
+  cc.check_int(config, "steps_per_light", minimum=1)
+  cc.check_choice(config, "data.kind", LIGHT_DATA_KINDS)
+  for f in ("data.width", "data.height"):
+    cc.check_int(config, f, minimum=11)  # the SSIM window
+  cc.check_int(config, "data.num_train", minimum=1)
+  cc.check_int(config, "data.num_test", minimum=1)
+  cc.check_int(config, "model.init_points", minimum=1)
+  cc.check_float(config, "model.init_opacity", above=0.0, below=1.0)
+  cc.check_choice(config, "sampler.kind", SAMPLER_KINDS)
+  cc.check_int(config, "sampler.rank", minimum=1)
+  cc.check_sequence(config, "sampler.groups", min_length=0, distinct=True,
+                    item_choices=tuple(group_shapes(16, 16)))
+  cc.check_int(config, "sampler.num_samples", minimum=1)
+  cc.check_float(config, "loss.volume_weight", minimum=0.0)
+  cc.check_int(config, "loss.volume_every", minimum=1)
+  cc.check_int(config, "planning.samples", minimum=2)
+  cc.check_int(config, "planning.downscale", minimum=1)
+  cc.check_int(config, "planning.ascent_steps", minimum=1)
+  lr = cc.check_float(config, "planning.ascent_lr", above=0.0)
+  cc.check_float(config, "planning.ascent_final_lr", above=0.0, maximum=lr)
+  cc.check_int(config, "test_lights.num_environments", minimum=0)
+  cc.check_int(config, "test_lights.num_random", minimum=0)
+  if config.test_lights.num_environments + config.test_lights.num_random < 1:
+    raise cc.ConfigError("config.test_lights: num_environments + num_random must be >= 1")
+  cc.check_float(config, "test_lights.power", above=0.0)
+  validate_render(config)
+
+
+# ----------------------------------------------------------------- variants
+
+
+def tiny(config):
+  """24 x 24 images of a synthetic diffuse shell (no Mitsuba), n = 4, 3 lights, few steps."""
+  config.num_lights = 3
+  config.steps_per_light = 30
+  config.progress = False
+  config.data.kind = "synthetic"
+  config.data.width = 24
+  config.data.height = 24
+  config.data.num_train = 4
+  config.data.num_test = 2
+  config.data.progress = False
+  config.model.out_coeffs = 1
+  config.model.light_coeffs = 4
+  config.model.init_points = 150
+  config.model.max_gaussians = 512
+  config.render.max_intersections = 1 << 11
+  # Steps are few: T's rate 2x the default's (its B_hat keeps 0.1x of T's).
+  config.optim.transfer_dc = 1e-2
+  config.sampler.lr.transfer_dc = 1e-3
+  config.loss.volume_every = 3
+  config.planning.downscale = 1
+  config.planning.ascent_steps = 6
+  config.planning.ascent_lr = 0.3
+  config.planning.ascent_final_lr = 0.03
+  config.test_lights.num_environments = 2
+  config.test_lights.num_random = 1
+  config.eval.lpips_net = ""
+  config.figures.sphere_height = 8
+  config.figures.sphere_width = 16
+
+
+VARIANTS = {f.__name__: f for f in (tiny,)}
+
+
+def get_config(variant=""):
+  """`default_config()` with the comma-separated `variant`s applied (`VARIANTS`)."""
+  return cc.with_variants(default_config(), variant, VARIANTS,
+                            "configs/light_planning.py")

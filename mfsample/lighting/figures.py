@@ -122,8 +122,12 @@ def u_sphere_figure(q, norm, path, height=32, width=64):
   plt.close(fig)
 
 
-def write_figures(config, workdir, results, ctx):
-  """The three figures of a finished run (called by `protocol.run_light_planning`)."""
+def write_figures(config, workdir, results, ctx, predictions):
+  """The three figures of a finished run (called by `protocol.run_light_planning`).
+
+  Args:
+    predictions: {strategy name: [K, T, H, W, 3] its final model's test renders}.
+  """
   from mfsample.lighting.tables import summarise
 
   summary = summarise(results["shared"], results["runs"])
@@ -132,14 +136,12 @@ def write_figures(config, workdir, results, ctx):
   rows = ([i for i, k in enumerate(kinds) if k == "environment"][:2]
           + [i for i, k in enumerate(kinds) if k == "random"][:1])
   camera = 0
-  predictions = {}
+  shown = {}
   for name in _order([r["strategy"] for r in results["runs"]]):
-    path = os.path.join(workdir, "runs", f"{name}_relit.npz")
-    if os.path.exists(path):
-      with np.load(path) as data:
-        predictions[strategies.LABELS.get(name, name)] = data["pred"][rows, camera]
+    if name in predictions:
+      shown[strategies.STRATEGIES[name].label] = predictions[name][rows, camera]
   truth = ctx.test_truth[rows, camera]
-  relit_figure(truth, predictions, rows, os.path.join(workdir, "relit.png"),
+  relit_figure(truth, shown, rows, os.path.join(workdir, "relit.png"),
                row_labels=[f"{kinds[i]} {i}" for i in rows])
   u_sphere_figure(np.asarray(results["shared"]["q"]), ctx.norm,
                   os.path.join(workdir, "u_sphere.png"), int(config.figures.sphere_height),

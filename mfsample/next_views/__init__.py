@@ -1,13 +1,13 @@
 """Uncertainty maps and next views for your data: a capture, and optionally a trained .ply.
 
-* `runner`: `run_uncertainty(config, workdir)`, the job of `experiments/uncertainty.py`.
-* `config`: its config and defaults (`default_config`).
+* `runner`: `run_next_views(config, workdir)`, the job of `experiments/next_views.py`.
+* `config`: its config and defaults (`default_config`), and its validator.
 * `candidates`: poses on a sphere oriented by the capture; the top k by U.
 * `figure`: the job's figure.
 """
 
 from mfsample.next_views.candidates import sphere_candidates, top_k
 from mfsample.next_views.config import default_config
-from mfsample.next_views.runner import run_uncertainty
+from mfsample.next_views.runner import run_next_views
 
-__all__ = ["default_config", "run_uncertainty", "sphere_candidates", "top_k"]
+__all__ = ["default_config", "run_next_views", "sphere_candidates", "top_k"]

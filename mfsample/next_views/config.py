@@ -1,4 +1,4 @@
-"""The config of `run_uncertainty`: uncertainty maps and next views for a dataset or a .ply.
+"""The config of `run_next_views`: uncertainty maps and next views for a dataset or a .ply.
 
 `default_config()` is a training config (`mfsample.train.default_config()`: the dataset, the
 model, B_hat, the loss, the optimiser, densification and the render budget, each field with
@@ -6,14 +6,20 @@ its comment there) with the job's defaults below, plus three blocks of its own: 
 (bring a trained 3DGS model), `views` (which views train, which are candidates) and
 `next_views` (how candidates are scored). The default runs the built-in Mitsuba scene at
 64 x 64: a field trained 2000 steps on every 4th of its 100 candidate views, the other 75
-ranked by U (about 5 minutes of CPU time). `configs/uncertainty.py`
+ranked by U (about 5 minutes of CPU time). `configs/next_views.py`
 selects variants; any field is overridden on the command line, e.g.
 `--config.data.kind=colmap --config.data.path=~/captures/garden --config.data.downscale=8`.
 """
 
 import ml_collections
 
+from mfsample import config_checks as checks
+from mfsample.data import resolve_path
+from mfsample.model import STOCHASTIC_KINDS
+from mfsample.train import config as training_variants
 from mfsample.train.config import default_config as training_config
+from mfsample.train.config import validate as validate_training
+from mfsample.train.initial import INIT_FROM
 
 
 def default_config():
@@ -64,3 +70,73 @@ def default_config():
   nv.sphere_views = 100  # candidates "sphere": how many poses (a Fibonacci spiral).
   nv.figure = True  # Write next_views.png (candidates by U, top k, test U maps).
   return config
+
+
+def validate(config):
+  """Checks every field the job reads (before anything is written); `ConfigError` naming
+  the field and its range."""
+  validate_training(config)  # every training field (data, model, sampler, loss, ..., eval)
+  checks.check_choice(config, "sampler.kind", STOCHASTIC_KINDS)
+  checks.check_choice(config, "model.init_from", INIT_FROM)
+  checks.check_choice(config, "next_views.candidates", ("unused", "sphere"))
+  for field in ("views.train_every", "next_views.k", "next_views.score_downscale",
+                "next_views.sphere_views", "posthoc.steps", "train.num_steps"):
+    checks.check_int(config, field, minimum=1)
+  checks.check_int(config, "next_views.samples", minimum=2)  # one sample: U = 0
+  checks.check_int(config, "eval.save_images", minimum=0)
+  if config.data.kind in ("colmap", "llff"):  # the held-out split of a capture
+    checks.check_int(config, "data.holdout_every", minimum=2)
+  if (config.model.init_from == "points" and config.data.kind != "colmap"
+      and not config.posthoc.ply):
+    raise checks.ConfigError(f"config.model.init_from = 'points' needs the sparse points of a "
+                             f"COLMAP capture, but config.data.kind = {config.data.kind!r}")
+  if config.next_views.candidates == "unused" and config.views.train_every == 1:
+    raise checks.ConfigError("config.views.train_every = 1 trains on every view and leaves no "
+                             "unused candidate: set it > 1 or next_views.candidates = 'sphere'")
+  if config.posthoc.ply:
+    if not resolve_path(config.posthoc.ply).is_file():
+      raise FileNotFoundError(f"config.posthoc.ply = {config.posthoc.ply!r}: no such file "
+                              f"({resolve_path(config.posthoc.ply)})")
+
+
+# ----------------------------------------------------------------- variants
+
+
+def colmap(config):
+  """A COLMAP capture (Mip-NeRF 360 layout): images_8, every 8th image a test view."""
+  config.data.kind = "colmap"
+  config.data.path = "data/capture"  # Point --config.data.path at the scene folder.
+  config.data.downscale = 8  # images_8/: Mip-NeRF 360's smallest copies (a CPU's size).
+  config.data.background = (0.0, 0.0, 0.0)  # 3DGS's default for real captures.
+  config.model.init_from = "points"  # 3DGS's start on real captures: the SfM points.
+
+
+def posthoc(config):
+  """A trained 3DGS model: B_hat fitted to its frozen Gaussians on every training view; the
+  candidates are new poses on a sphere (no view is left unused)."""
+  config.posthoc.ply = "point_cloud.ply"  # Point --config.posthoc.ply at the model.
+  config.views.train_every = 1
+  config.next_views.candidates = "sphere"
+
+
+def tiny(config):
+  """Random ground-truth Gaussians at 32 x 32: no files, no Mitsuba, a few seconds."""
+  small = training_variants.get_config("tiny")
+  for block in ("data", "model", "train", "densify", "loss", "render", "eval"):
+    config[block] = small[block]
+  config.data.synthetic.num_train = 12
+  config.densify.start = config.densify.stop = 1_000  # fixed shapes: one compilation
+  config.eval.save_images = 2
+  config.views.train_every = 2  # 6 training views, 6 candidates
+  config.next_views.k = 2
+  config.next_views.samples = 4
+  config.next_views.sphere_views = 6
+
+
+VARIANTS = {f.__name__: f for f in (colmap, posthoc, tiny)}
+
+
+def get_config(variant=""):
+  """`default_config()` with the comma-separated `variant`s applied (`VARIANTS`)."""
+  return checks.with_variants(default_config(), variant, VARIANTS,
+                                "configs/next_views.py")

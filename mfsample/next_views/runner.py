@@ -1,6 +1,6 @@
 """Uncertainty maps and next views for a dataset, or for a 3DGS model trained elsewhere.
 
-`run_uncertainty(config, workdir)`:
+`run_next_views(config, workdir)`:
 
 1. loads the dataset of `config.data` (NeRF Synthetic, LLFF, a COLMAP capture, a built-in
    scene or random Gaussians) and splits its training views: every `views.train_every`-th
@@ -20,152 +20,100 @@ fields), `checkpoints/`, `train_log.json`, `point_cloud.ply` (a trained field's 
 `next_views.png` and `results.json`. A call on a finished workdir returns its results.
 """
 
-import json
-import os
 import time
 
 import jax.numpy as jnp
 import numpy as np
 
-from mfsample import config_checks as checks
+from mfsample import interrupts, jobs
 from mfsample import uncertainty as unc
-from mfsample import workdir as workdir_lib
-from mfsample._json import write_json
-from mfsample.train.initial import INIT_FROM
-
-# Fields that change only how a call looks or how fast it goes: a later call may differ.
-RESUME_FREE_FIELDS = ("train.progress", "render.chunks_per_step", "next_views.figure")
-
-
-def check_config(config):
-  """Validates the fields the job reads (before anything is written); ConfigError names
-  the field."""
-  from mfsample.train.config import validate
-  validate(config)  # every training field (data, model, sampler, loss, train, render, eval)
-  checks.check_choice(config, "sampler.kind", ("lowrank", "block", "diagonal"))
-  checks.check_choice(config, "model.init_from", INIT_FROM)
-  checks.check_choice(config, "next_views.candidates", ("unused", "sphere"))
-  for field in ("views.train_every", "next_views.k", "next_views.score_downscale",
-                "next_views.sphere_views", "posthoc.steps", "train.num_steps"):
-    checks.check_int(config, field, minimum=1)
-  checks.check_int(config, "next_views.samples", minimum=2)  # one sample: U = 0
-  checks.check_int(config, "eval.save_images", minimum=0)
-  if config.data.kind in ("colmap", "llff"):
-    checks.check_int(config, "data.holdout_every", minimum=2)
-  if (config.model.init_from == "points" and config.data.kind != "colmap"
-      and not config.posthoc.ply):
-    raise checks.ConfigError(f"config.model.init_from = 'points' needs the sparse points of a "
-                             f"COLMAP capture, but config.data.kind = {config.data.kind!r}")
-  if config.next_views.candidates == "unused" and config.views.train_every == 1:
-    raise checks.ConfigError("config.views.train_every = 1 trains on every view and leaves no "
-                             "unused candidate: set it > 1 or next_views.candidates = 'sphere'")
-  if config.posthoc.ply:
-    from mfsample.data import resolve_path
-    if not resolve_path(config.posthoc.ply).is_file():
-      raise FileNotFoundError(f"config.posthoc.ply = {config.posthoc.ply!r}: no such file "
-                              f"({resolve_path(config.posthoc.ply)})")
+from mfsample.data import datasets, resolve_path
+from mfsample.mean_render import render_mean
+from mfsample.next_views.config import validate
+from mfsample.renderer.budget import Budgets, render_with_budget
+from mfsample.train.config import speed_only_fields
 
 
-def check_workdir(config, workdir):
-  """Refuses a workdir holding work (checkpoints, results) of a different config, naming the
-  differing fields. A workdir whose earlier call failed before computing anything (a wrong
-  data path, say) is taken over."""
-  workdir_lib.check_same_config(
-      config, workdir, free_fields=RESUME_FREE_FIELDS,
-      has_results=workdir_lib.holds_results(workdir, "results.json", "checkpoints"),
-      results="a run")
-
-
-def run_uncertainty(config, workdir):
+def run_next_views(config, workdir):
   """Trains or fits, maps the test views' uncertainty and proposes the next views.
 
   Args:
-    config: `mfsample.next_views.default_config()` or a variant (`configs/uncertainty.py`).
+    config: `mfsample.next_views.default_config()` or a variant (`configs/next_views.py`).
     workdir: output folder (see the module docstring); resumed when it exists.
 
   Returns:
     the results dict also written to `results.json`.
   """
-  from mfsample.data import datasets as data_lib
+  with jobs.open_workdir(JOB, config, workdir) as wd:
+    finished = wd.read_json("results.json")
+    if finished is not None:
+      return finished
+    t0 = time.perf_counter()
+    dataset = datasets.load_dataset(config.data)
+    wd.write_config()
+    every = int(config.views.train_every)
+    index = np.arange(len(dataset.train))
+    train_idx, unused_idx = index[index % every == 0], index[index % every != 0]
+    train_views = dataset.train.subset(train_idx)
+    result, kind = _train_or_fit(config, dataset, train_views, wd.file("checkpoints"))
+    model, settings = result.state.model, result.setup.step_config.settings
+    wd.write_json("train_log.json", result.history, indent=2)
+    if kind == "joint" and config.eval.export_ply:
+      from mfsample.data.ply import export_ply
+      export_ply(wd.file("point_cloud.ply"), model)
 
-  check_config(config)
-  check_workdir(config, workdir)
-  os.makedirs(workdir, exist_ok=True)
-  results_path = os.path.join(workdir, "results.json")
-  if os.path.exists(results_path):
-    with open(results_path) as f:
-      return json.load(f)
-  workdir_lib.write_config(config, workdir)
-  t0 = time.perf_counter()
+    # One z (M = next_views.samples) for the test maps and the candidates; every render
+    # starts from the training's budget (renders of one size share the compiled code).
+    z = unc.uncertainty_z(model, int(config.next_views.samples), int(config.next_views.z_seed))
+    budgets = Budgets(eval=settings, score=settings, mean=settings)
+    test = _test_maps(config, model, dataset, z, settings, wd)
+    center = 0.5 * (np.asarray(dataset.bounds[0], np.float64)
+                    + np.asarray(dataset.bounds[1], np.float64))
+    proposal = _propose(config, model, dataset, train_idx, unused_idx, center, z, budgets, wd)
+    wd.write_json("next_views.json", proposal["record"], indent=2)
+    if config.next_views.figure:
+      from mfsample.next_views.figure import next_views_figure
 
-  dataset = data_lib.load_dataset(config.data)
-  every = int(config.views.train_every)
-  index = np.arange(len(dataset.train))
-  train_idx, unused_idx = index[index % every == 0], index[index % every != 0]
-  train_views = dataset.train.subset(train_idx)
-  result, kind = _train_or_fit(config, dataset, train_views, workdir)
-  model, settings = result.state.model, result.setup.step_config.settings
-  write_json(os.path.join(workdir, "train_log.json"), result.history)
-  if kind == "joint" and config.eval.export_ply:
-    from mfsample.data.ply import export_ply
-    export_ply(os.path.join(workdir, "point_cloud.ply"), model)
+      shown = min(4, len(dataset.test))
+      next_views_figure(
+          wd.file("next_views.png"),
+          train_centers=np.asarray(train_views.cameras.center),
+          candidate_centers=np.asarray(proposal["cameras"].center), u=proposal["u"],
+          top=proposal["top"], top_renders=proposal["renders"], top_maps=proposal["maps"],
+          top_images=proposal["images"], test_renders=test["renders"][:shown],
+          test_maps=test["maps"][:shown],
+          title=f"{_scene_name(config)}: {kind} uncertainty, {len(train_views)} training "
+                f"views, next {len(proposal['top'])} of {len(proposal['u'])} candidates")
 
-  background = jnp.asarray(dataset.background, jnp.float32)
-  # One z (M = next_views.samples) for the test maps and the candidates, and one budget
-  # shared by every render: test views and candidates of one size share the compiled code.
-  z = unc.uncertainty_z(model, int(config.next_views.samples), int(config.next_views.z_seed))
-  state = {"settings": settings}
-  test = _test_maps(config, model, dataset, z, state, os.path.join(workdir, "test"))
-  center = 0.5 * (np.asarray(dataset.bounds[0], np.float64)
-                  + np.asarray(dataset.bounds[1], np.float64))
-  proposal = _propose(config, model, dataset, train_idx, unused_idx, center, z, state,
-                      background)
-  write_json(os.path.join(workdir, "next_views.json"), proposal["record"])
-  if config.next_views.figure:
-    from mfsample.next_views.figure import next_views_figure
-
-    shown = min(4, len(dataset.test))
-    next_views_figure(
-        os.path.join(workdir, "next_views.png"),
-        train_centers=np.asarray(train_views.cameras.center),
-        candidate_centers=np.asarray(proposal["cameras"].center), u=proposal["u"],
-        top=proposal["top"], top_renders=proposal["renders"], top_maps=proposal["maps"],
-        top_images=proposal["images"], test_renders=test["renders"][:shown],
-        test_maps=test["maps"][:shown],
-        title=f"{_scene_name(config)}: {kind} uncertainty, {len(train_views)} training views, "
-              f"next {len(proposal['top'])} of {len(proposal['u'])} candidates")
-
-  record = proposal["record"]
-  results = {
-      "scene": _scene_name(config), "kind": kind, "steps": int(result.state.step),
-      "train_seconds": result.train_seconds, "live_gaussians": model.num_live,
-      "num_train_views": len(train_views), "num_test_views": len(dataset.test),
-      "test": test["metrics"],
-      "next_views": {key: record[key] for key in ("candidates", "num_candidates", "samples",
-                                                   "score_downscale", "rho_u_error",
-                                                   "rho_u_angle", "rho_error_angle")},
-      "top_k": [{"rank": t["rank"], "name": t["name"], "u": t["u"]} for t in record["top_k"]],
-      "seconds_this_call": time.perf_counter() - t0,
-  }
-  write_json(results_path, results)
-  return results
+    record = proposal["record"]
+    results = {
+        "scene": _scene_name(config), "kind": kind, "steps": int(result.state.step),
+        "train_seconds": result.train_seconds, "live_gaussians": model.num_live,
+        "num_train_views": len(train_views), "num_test_views": len(dataset.test),
+        "test": test["metrics"],
+        "next_views": {key: record[key] for key in (
+            "candidates", "num_candidates", "samples", "score_downscale", "rho_u_error",
+            "rho_u_angle", "rho_error_angle")},
+        "top_k": [{"rank": t["rank"], "name": t["name"], "u": t["u"]}
+                  for t in record["top_k"]],
+        "seconds_this_call": time.perf_counter() - t0,
+    }
+    wd.write_json("results.json", results, indent=2)
+    return results
 
 
 def _scene_name(config):
-  from mfsample.data import resolve_path
   kind = config.data.kind
-  if kind in ("blender", "colmap", "llff"):
+  if datasets.DATA_KINDS[kind].reads_path:
     return resolve_path(config.data.path).name
   return config.data.scene if kind == "scene" else "synthetic"
 
 
-def _train_or_fit(config, dataset, train_views, workdir):
-  """(`TrainResult`, "joint" | "posthoc") with checkpoints in `workdir/checkpoints`."""
-  from mfsample.data import resolve_path
+def _train_or_fit(config, dataset, train_views, checkpoint_dir):
+  """(`TrainResult`, "joint" | "posthoc") with checkpoints in `checkpoint_dir`."""
   from mfsample.train import train
   from mfsample.train.posthoc import fit_spread
 
-  checkpoint_dir = os.path.join(workdir, "checkpoints")
   if config.posthoc.ply:
     cfg = config.copy_and_resolve_references()
     with cfg.unlocked():
@@ -176,27 +124,28 @@ def _train_or_fit(config, dataset, train_views, workdir):
                points=dataset.points), "joint"
 
 
-def _test_maps(config, model, dataset, z, state, directory):
-  """Renders, U maps and metrics of every test view, with a progress bar; written to
-  `directory`. Returns {"metrics", "renders", "maps"}."""
-  from tqdm.auto import tqdm
-
+def _test_maps(config, model, dataset, z, settings, wd):
+  """Renders, U maps and metrics of every test view, with a progress bar; written to the
+  workdir's `test/`. Returns {"metrics", "renders", "maps"}."""
   from mfsample import metrics as metrics_lib
   from mfsample.train import evaluate as eval_lib
 
   lpips_fn = metrics_lib.make_lpips(config.eval.lpips_net) if config.eval.lpips_net else None
   per_view = []
-  for i in tqdm(range(len(dataset.test)), desc="test views", disable=not config.train.progress,
-                dynamic_ncols=True):
-    ev = eval_lib.evaluate(model, dataset.test.subset([i]), background=dataset.background,
-                           settings=state["settings"], lpips_fn=lpips_fn, uncertainty_z=z)
-    per_view.append(ev)
+  bar = wd.progress(len(dataset.test), "test views")
+  for i in range(len(dataset.test)):
+    interrupts.check(f"at test view {i}")
+    per_view.append(eval_lib.evaluate(model, dataset.test.subset([i]),
+                                      background=dataset.background, settings=settings,
+                                      lpips_fn=lpips_fn, uncertainty_z=z))
+    bar.update(1)
+  bar.close()
   merged = eval_lib.EvalResult(
       metrics={}, per_view={key: [e.per_view[key][0] if e.per_view[key] else None
                                   for e in per_view] for key in ("psnr", "ssim", "lpips")},
       images=np.concatenate([e.images for e in per_view]),
       uncertainty=np.concatenate([e.uncertainty for e in per_view]))
-  eval_lib.save_images(directory, merged, dataset.test, num=int(config.eval.save_images))
+  eval_lib.save_images(wd.file("test"), merged, dataset.test, num=int(config.eval.save_images))
   u = merged.uncertainty.reshape(len(per_view), -1).sum(axis=1)
   metrics = {"psnr": float(np.mean(merged.per_view["psnr"])),
              "ssim": float(np.mean(merged.per_view["ssim"])),
@@ -204,95 +153,87 @@ def _test_maps(config, model, dataset, z, state, directory):
              "mean_u": float(np.mean(u)), "samples": int(z.shape[0]),
              "per_view": {"name": list(dataset.test.names), "u": u.tolist(),
                           **merged.per_view}}
-  write_json(os.path.join(directory, "metrics.json"), metrics)
+  wd.write_json("test/metrics.json", metrics, indent=2)
   return {"metrics": {k: v for k, v in metrics.items() if k != "per_view"},
           "renders": merged.images, "maps": merged.uncertainty}
 
 
-def _render(model, camera, background, state):
-  """[H, W, 3] mean render of one camera; the budget that sufficed is kept in
-  `state["settings"]`. The jitted function of the test evaluation, so candidates of the
-  test views' size compile nothing new."""
-  from mfsample.renderer.budget import render_with_budget
-  from mfsample.train.evaluate import render_mean
-
-  out, state["settings"] = render_with_budget(render_mean, state["settings"], model, camera,
-                                              background)
-  return np.asarray(jnp.clip(out.rgb, 0.0, 1.0))
-
-
-def _u(model, camera, z, background, state):
-  """`uncertainty.Uncertainty` of one camera (budget kept in `state["settings"]`)."""
-  from mfsample.renderer.budget import render_with_budget
-
-  u, state["settings"] = render_with_budget(unc.uncertainty, state["settings"], model, camera,
-                                            z, background=background)
-  return u
-
-
-def _propose(config, model, dataset, train_idx, unused_idx, center, z, state, background):
-  """U of every candidate (progress bar), the top k with their renders and U maps, and the
-  record. With candidate images, the error of the mean render there and Spearman's rho of U
-  against it: the measure of `mfsample.planning.u_error` (U at the scoring size, the squared
-  error at full size, over the unused views; rho with the angle to the nearest training
-  view beside it)."""
-  from scipy.stats import spearmanr
-  from tqdm.auto import tqdm
-
-  from mfsample.next_views.candidates import sphere_candidates, top_k
-  from mfsample.planning.poses import angle_to_nearest, downscale_camera
+def _candidates(config, dataset, train_idx, unused_idx, center):
+  """(cameras [B], images [B, H, W, 3] or None, names) of the candidates."""
+  from mfsample.next_views.candidates import sphere_candidates
 
   nv = config.next_views
-  down = int(nv.score_downscale)
-  record = {"candidates": nv.candidates, "samples": int(z.shape[0]),
-            "score_downscale": down, "rho_u_error": None, "rho_u_angle": None,
-            "rho_error_angle": None}
   if nv.candidates == "unused":
-    cameras = dataset.train.cameras[unused_idx]
-    images = np.asarray(dataset.train.images)[unused_idx]
     names = [dataset.train.names[i] for i in unused_idx] if dataset.train.names else [
         f"train_{i}" for i in unused_idx]
-  else:
-    cameras = sphere_candidates(dataset.train.cameras[train_idx], center, int(nv.sphere_views))
-    images = None
-    names = [f"sphere_{i:03d}" for i in range(len(cameras))]
+    return (dataset.train.cameras[unused_idx], np.asarray(dataset.train.images)[unused_idx],
+            names)
+  cameras = sphere_candidates(dataset.train.cameras[train_idx], center, int(nv.sphere_views))
+  return cameras, None, [f"sphere_{i:03d}" for i in range(len(cameras))]
+
+
+def _propose(config, model, dataset, train_idx, unused_idx, center, z, budgets, wd):
+  """U of every candidate (progress bar), the top k with their renders and U maps, and the
+  record. With candidate images, the error of the mean render there and Spearman's rho of U
+  against it (`mfsample.planning.u_error`: U at the scoring size, the squared error at full
+  size; rho with the angle to the nearest training view beside it)."""
+  from mfsample.next_views.candidates import top_k
+  from mfsample.planning.u_error import u_against_error
+
+  nv = config.next_views
+  cameras, images, names = _candidates(config, dataset, train_idx, unused_idx, center)
   num = len(cameras)
-  u, error = np.zeros(num), np.zeros(num)
-  kept = {}  # the current top k: index -> (render, U map) at full size
-  for i in tqdm(range(num), desc="candidates", disable=not config.train.progress,
-                dynamic_ncols=True):
-    camera = cameras[i]
-    res = _u(model, downscale_camera(camera, down), z, background, state)
-    u[i] = float(res.value)
-    render = _render(model, camera, background, state) if images is not None or down == 1 \
-        else None
-    if images is not None:
-      error[i] = float(np.mean((render - images[i]) ** 2))
-    if down == 1:  # keep the renders and maps of the current top k only (memory)
-      kept[i] = (render, np.asarray(res.pixel_map))
-      kept = {j: kept[j] for j in top_k(u[:i + 1], int(nv.k)) if j in kept}
-  top = top_k(u, int(nv.k))
-  for i in top:
-    if i not in kept:  # scored at a smaller size: render and map the proposals at full size
-      camera = cameras[int(i)]
-      kept[i] = (_render(model, camera, background, state),
-                 np.asarray(_u(model, camera, z, background, state).pixel_map))
-  if images is not None:
-    rho = lambda a, b: float(spearmanr(a, b).correlation)
-    both = dataset.train.cameras[np.concatenate([train_idx, unused_idx])]
-    angle = angle_to_nearest(both, list(range(len(train_idx))), center)[len(train_idx):]
-    record.update(rho_u_error=rho(u, error), rho_u_angle=rho(u, angle),
-                  rho_error_angle=rho(error, angle))
+  bar = wd.progress(num, "candidates")
+  ranking = u_against_error(
+      model, cameras, z, background=dataset.background, images=images,
+      train_cameras=dataset.train.cameras[train_idx] if images is not None else None,
+      center=center, score_downscale=int(nv.score_downscale), budgets=budgets, batch=16,
+      on_batch=lambda done: bar.update(done - bar.n))
+  bar.close()
+  budgets = ranking.budgets
+  top = top_k(ranking.u, int(nv.k))
+  bg = jnp.asarray(dataset.background, jnp.float32)
+  renders, maps = [], []
+  for i in top:  # the proposals' mean renders and U maps at full size
+    camera = cameras[int(i)]
+    out, settings = render_with_budget(render_mean, budgets.eval, model, camera, bg)
+    u, settings = render_with_budget(unc.uncertainty, settings, model, camera, z,
+                                     background=bg)
+    budgets = budgets.replace(eval=settings)
+    renders.append(np.asarray(jnp.clip(out.rgb, 0.0, 1.0)))
+    maps.append(np.asarray(u.pixel_map))
   w2c = np.asarray(cameras.world_to_camera, np.float64)
-  record.update(num_candidates=num, u=u.tolist(), names=names, top_k=[{
-      "rank": rank + 1, "index": int(i), "name": names[i], "u": float(u[i]),
-      "error": None if images is None else float(error[i]),
-      "world_to_camera": w2c[i].tolist(),
-      "intrinsics": {"fx": float(cameras.fx[i]), "fy": float(cameras.fy[i]),
-                     "cx": float(cameras.cx[i]), "cy": float(cameras.cy[i]),
-                     "width": int(cameras.width), "height": int(cameras.height)},
-  } for rank, i in enumerate(top)])
-  return {"record": record, "u": u, "top": top, "cameras": cameras,
+  record = {"candidates": nv.candidates, "samples": int(z.shape[0]),
+            "score_downscale": int(nv.score_downscale), "rho_u_error": ranking.rho_u_error,
+            "rho_u_angle": ranking.rho_u_angle, "rho_error_angle": ranking.rho_error_angle,
+            "num_candidates": num, "u": ranking.u.tolist(), "names": names, "top_k": [{
+                "rank": rank + 1, "index": int(i), "name": names[i], "u": float(ranking.u[i]),
+                "error": None if images is None else float(ranking.error[i]),
+                "world_to_camera": w2c[i].tolist(),
+                "intrinsics": {"fx": float(cameras.fx[i]), "fy": float(cameras.fy[i]),
+                               "cx": float(cameras.cx[i]), "cy": float(cameras.cy[i]),
+                               "width": int(cameras.width), "height": int(cameras.height)},
+            } for rank, i in enumerate(top)]}
+  return {"record": record, "u": ranking.u, "top": top, "cameras": cameras,
           "images": None if images is None else images[top],
-          "renders": np.stack([kept[i][0] for i in top]),
-          "maps": np.stack([kept[i][1] for i in top])}
+          "renders": np.stack(renders), "maps": np.stack(maps)}
+
+
+def report(results, workdir):
+  """What `experiments/next_views.py` prints: test quality, the proposals, and how far the
+  ranking follows the model's error on this capture."""
+  lines = [f"{results['kind']} uncertainty of {results['scene']}: test PSNR "
+           f"{results['test']['psnr']:.2f} dB, mean U {results['test']['mean_u']:.4g}"]
+  lines += [f"  next view {t['rank']}: {t['name']} (U = {t['u']:.4g})" for t in results["top_k"]]
+  rho = results["next_views"]["rho_u_error"]
+  if rho is not None:
+    lines.append(f"  Spearman rho of U against the model's error over the candidates: "
+                 f"{rho:.2f}")
+  lines.append(f"written to {workdir}")
+  return "\n".join(lines)
+
+
+# Fields that change only how a call looks or how fast it goes: a later call may differ.
+FREE_FIELDS = ("train.progress", "next_views.figure") + speed_only_fields()
+JOB = jobs.Job("next views", run_next_views, validate, FREE_FIELDS,
+               ("results.json", "checkpoints"), report=report, progress_field="train.progress")

@@ -5,7 +5,6 @@
 * `strategies`: random, farthest point, ActiveNeRF-style variance, FisherRF, ACP and the
   three variants of ours, behind one interface.
 * `runner`: the protocol as pure steps and a thin, resumable loop (`run_camera_planning`).
-* `workdirs`: what a planning workdir holds and when a later call may add runs to it.
 * `tables`: Table 1, the paired differences and the other tables, from run records.
 * `config`: the protocol's config and its defaults (`default_config`).
 """

@@ -14,9 +14,9 @@ import ml_collections
 
 from mfsample import config_checks
 from mfsample.data import FILE_KINDS
-from mfsample.model import GROUPS
+from mfsample.model import GROUPS, STOCHASTIC_KINDS
 from mfsample.planning.pool import POOL_KINDS
-from mfsample.planning.strategies import NAMES, TABLE1_NAMES
+from mfsample.planning.strategies import NAMES, STRATEGIES, TABLE1_NAMES
 from mfsample.train.config import LPIPS_NETS
 from mfsample.train.config import default_config as training_config
 from mfsample.train.config import validate as validate_training
@@ -274,7 +274,7 @@ def validate(config):
   c.check_float(config, f"{s}.optimize.z_drop_scale", above=0.0, maximum=1.0)
   c.check_int(config, f"{s}.optimize.downscale", minimum=1)
   c.check_bool(config, f"{s}.optimize.resample_z")
-  c.check_choice(config, f"{s}.optimize.sampler", ("", "lowrank", "diagonal", "block"))
+  c.check_choice(config, f"{s}.optimize.sampler", ("",) + STOCHASTIC_KINDS)
   c.check_int(config, f"{s}.optimize.best_every", minimum=1)
   c.check_int(config, f"{s}.fisher.probes", minimum=1)
   c.check_int(config, f"{s}.fisher.train_probes", minimum=1)
@@ -295,3 +295,115 @@ def validate(config):
   c.check_int(config, "figures.landscape_v", minimum=1)
   c.check_bool(config, "figures.landscape_trajectory")
   return config
+
+
+# ----------------------------------------------------------------- variants
+
+
+def lego(config):
+  """NeRF Synthetic lego on a fixed pool, at 80 x 80 (rounds and scoring at 40 x 40)."""
+  config.strategies = tuple(n for n in TABLE1_NAMES if not STRATEGIES[n].make(
+      config.strategy).new_poses)  # the selection strategies: no oracle on disk
+  config.data.kind = "blender"
+  for t in (config.round_train, config.final_train):
+    t.data.extent = 4.4  # 1.1 x the camera distance (4.03).
+    t.model.init_points = 3_000  # More pixels than the default scene's 64 x 64.
+    t.render.max_intersections = 1 << 15
+
+
+def rounds2000(config):
+  """The paper's round length: every re-initialised round model trains 2000 steps."""
+  config.rounds.steps = 2000
+  config.round_train.loss.volume_stop_before_end = 100  # The authors' value at 2000 steps.
+
+
+def authors_rounds(config):
+  """Round models with the authors' recipe: 3DGS densification from step 500 to the end of
+  the round and the volume weight lambda = 1 / (number of training views)."""
+  d = config.round_train.densify
+  d.start = 500
+  d.every = 100
+  d.stop = config.rounds.get_ref("steps")
+  d.opacity_reset_every = 3_000  # The authors' period: no reset within a 2000-step round.
+  config.round_train.model.max_gaussians = 20_000
+  config.round_train.loss.volume_weight = None  # 1 / the number of training views.
+
+
+def fullres(config):
+  """Round models train on, and candidates are scored at, the test resolution."""
+  config.rounds.downscale = 1
+  config.strategy.score_downscale = 1
+
+
+def densified_final(config, steps=2000, max_gaussians=20_000):
+  """Final models trained `steps` steps with 3DGS densification (every 100 steps from step
+  500 to the end, no opacity reset before step 3000)."""
+  t = config.final_train
+  t.train.num_steps = steps
+  t.train.log_every = steps
+  t.densify.start = 500
+  t.densify.every = 100
+  t.densify.stop = steps
+  t.densify.opacity_reset_every = 3_000
+  t.model.max_gaussians = max_gaussians
+
+
+def paper_scale(config):
+  """Lego's final models as the authors train them, on the round models of lego,rounds2000
+  (40 x 40): the files' 400 x 400 images, 100k random initial points, SH degree 3, 7000
+  steps with densification and opacity resets."""
+  lego(config)
+  rounds2000(config)
+  config.strategies = ("farthest", "ours_sel")
+  config.data.downscale = 1
+  config.rounds.downscale = 10
+  config.strategy.score_downscale = 10
+  densified_final(config, steps=7_000, max_gaussians=300_000)
+  t = config.final_train
+  t.densify.sh_degree_every = 1_000
+  t.model.sh_degree = 3
+  t.model.init_points = 100_000
+  t.render.max_intersections = 1 << 20
+  t.render.max_budget = 1 << 26
+
+
+def tiny(config):
+  """24 x 24 images of random ground-truth Gaussians, 8 candidates, 3 views, a few steps."""
+  config.eval_views = (2, 3)
+  config.max_views = 3
+  config.progress = False
+  config.data.kind = "synthetic"
+  config.data.width = 24
+  config.data.height = 24
+  config.data.num_candidates = 8
+  config.data.num_test = 2
+  config.data.background = (0.0, 0.0, 0.0)
+  for t in (config.round_train, config.final_train):
+    t.model.init_points = 150
+    t.model.max_gaussians = 512
+    t.data.extent = 3.3
+    t.render.max_intersections = 1 << 11
+  config.rounds.first_steps = 100
+  config.rounds.steps = 100
+  config.rounds.downscale = 1
+  config.final_train.train.num_steps = 12
+  config.round_train.loss.volume_every = 3
+  config.strategy.optimize.steps = 12
+  config.strategy.optimize.lr = 1e-2
+  config.strategy.optimize.z_drop_step = 8
+  config.strategy.activenerf.steps = 4
+  config.strategy.fisher.train_probes = 2
+  config.strategy.acp.resolution = 8
+  config.eval.lpips_net = ""
+  config.figures.landscape_u = 6
+  config.figures.landscape_v = 3
+
+
+VARIANTS = {f.__name__: f for f in (lego, rounds2000, authors_rounds, fullres, densified_final,
+                                    paper_scale, tiny)}
+
+
+def get_config(variant=""):
+  """`default_config()` with the comma-separated `variant`s applied (`VARIANTS`)."""
+  return config_checks.with_variants(default_config(), variant, VARIANTS,
+                                     "configs/camera_planning.py")

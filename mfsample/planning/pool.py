@@ -130,11 +130,11 @@ def _synthetic_pool(cfg, background):
                             fov_x=math.radians(float(s.fov_x_deg)), width=int(cfg.width),
                             height=int(cfg.height))
   bg = jnp.asarray(background, jnp.float32)
-  state = {"settings": RenderSettings(max_intersections=1 << 12)}
+  settings = RenderSettings(max_intersections=1 << 12)  # the oracle's own, grown as needed
 
   def oracle(camera):
-    out, state["settings"] = render_with_budget(render, state["settings"], truth, camera,
-                                                background=bg)
+    nonlocal settings
+    out, settings = render_with_budget(render, settings, truth, camera, background=bg)
     return np.asarray(jnp.clip(out.rgb, 0.0, 1.0))
 
   def views(num, stream):

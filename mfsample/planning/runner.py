@@ -23,8 +23,6 @@ first round of the three "Ours" variants) are shared through an in-memory cache.
 
 import collections
 import hashlib
-import json
-import os
 import time
 from typing import NamedTuple
 
@@ -32,17 +30,20 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from mfsample import interrupts, jobs
 from mfsample import metrics as metrics_lib
 from mfsample import uncertainty as unc
-from mfsample import workdir as workdir_lib
-from mfsample._json import atomic_path, write_json, write_text
 from mfsample.baselines import activenerf
 from mfsample.data._io import area_downscale
 from mfsample.data.views import Views
-from mfsample.planning import figures, poses, strategies, tables, training, workdirs
+from mfsample.model import STOCHASTIC_KINDS
+from mfsample.planning import figures, poses, strategies, tables, training
 from mfsample.planning.config import validate
 from mfsample.planning.pool import Pool, make_pool, stack_cameras
+from mfsample.renderer.budget import Budgets
+from mfsample.train.config import render_settings, speed_only_fields
 from mfsample.train.evaluate import mean_metrics
+from mfsample.train.step import clear_compiled_steps
 
 
 class Selected(NamedTuple):
@@ -117,7 +118,7 @@ def round_config(config, kind):
   with cfg.unlocked():
     if kind in ("deterministic", "variance"):
       cfg.sampler.kind = "deterministic"
-    elif kind in ("lowrank", "diagonal", "block"):  # a strategy that names its sampler
+    elif kind in STOCHASTIC_KINDS:  # a strategy that names its sampler
       cfg.sampler.kind = kind
     if r.warm_start:
       cfg.train.num_steps = int(r.first_steps) + (int(config.max_views) - 2) * int(r.steps)
@@ -130,7 +131,8 @@ class Trainer:
   """Trains (and caches) models for the rounds and the final evaluation.
 
   Host-side bookkeeping only: the cache maps (kind, seed, view keys) to trained models, and
-  `settings` remembers the render budgets that sufficed, so later calls start from them.
+  the trainer keeps the render budget that sufficed for each kind of model it trains
+  (`settings_of`), so later trainings start from it.
   """
 
   def __init__(self, config, pool: Pool, cache_size=24):
@@ -138,8 +140,13 @@ class Trainer:
     self.pool = pool
     self.cache = collections.OrderedDict()
     self.cache_size = cache_size
-    self.settings = {}
+    self._budgets = {}  # ("round", kind) or "final" -> RenderSettings; only `_train` grows it
     self.train_seconds = 0.0
+
+  def settings_of(self, budget):
+    """The `RenderSettings` that sufficed for the models of `budget` (("round", kind) or
+    "final"), or None before the first of them is trained."""
+    return self._budgets.get(budget)
 
   def _cached(self, key, make):
     if key in self.cache:
@@ -162,23 +169,17 @@ class Trainer:
     views = as_views(selected, downscale)
     t0 = time.perf_counter()
     if training.densifies(cfg):
-      # Every densified model compiles its own shapes (view count, capacity buckets), and
-      # XLA:CPU keeps each executable's code mapped: a lego run exhausted the process's
-      # memory maps (vm.max_map_count, 65530) in its second seed. What an earlier model
-      # compiled has other shapes than this one's, but for a few small functions that
-      # recompile in seconds against a model's minutes, so the caches go first. The clear
-      # is process-wide: other compiled functions of the caller recompile on next use.
-      jax.clear_caches()
+      clear_compiled_steps()  # the earlier models' shapes would pile up (see there)
       trained = training.train_densified(cfg, views, seed=seed, bounds=self.pool.bounds,
-                                         settings=self.settings.get(budget),
+                                         settings=self._budgets.get(budget),
                                          points=self.pool.points)
     else:
       trained = training.train_on_views(cfg, views, seed=seed, bounds=self.pool.bounds,
                                         pad_to=self.config.max_views,
-                                        settings=self.settings.get(budget), state=state,
+                                        settings=self._budgets.get(budget), state=state,
                                         stop_at=stop_at, points=self.pool.points)
     self.train_seconds += time.perf_counter() - t0
-    self.settings[budget] = trained.settings
+    self._budgets[budget] = trained.settings
     return trained
 
   def round_state(self, base, selected, seed):
@@ -244,17 +245,16 @@ def scoring_start(config):
   """Starting settings of the strategies' renders (scores, ascents): the round models'
   renderer (`round_train.render`: footprint rule, compositor) with a small budget, grown
   on overflow."""
-  from mfsample.train.loop import render_settings
-
   return render_settings(config.round_train.render).holding_budget(1 << 12)
 
 
-def choose_next(strategy, pool: Pool, config, seed, trainer: Trainer, budgets, selected,
-                available):
+def choose_next(strategy, pool: Pool, config, seed, trainer: Trainer, budgets: Budgets,
+                selected, available):
   """One round of a strategy: its choice of the next view after the views `selected`.
 
   Trains (or takes from `trainer`'s cache) the round model the strategy needs and draws its
-  random key from the seed, the strategy and the round, so a round can be replayed alone.
+  random key from the seed, the strategy's stream and the round, so a round can be replayed
+  alone.
 
   Args:
     strategy: `strategies.Strategy`.
@@ -262,12 +262,12 @@ def choose_next(strategy, pool: Pool, config, seed, trainer: Trainer, budgets, s
     config: planning config.
     seed: int.
     trainer: `Trainer`.
-    budgets: {purpose: RenderSettings} shared across strategies; updated in place.
+    budgets: `Budgets` that sufficed so far (shared by the strategies of a call).
     selected: list of `Selected`, the current views.
     available: [C] bool, candidates not selected yet.
 
   Returns:
-    the strategy's `strategies.Choice`.
+    the strategy's `strategies.Choice` (its `budgets`: the ones to use next).
   """
   model = None
   if strategy.model_kind is not None:
@@ -275,17 +275,13 @@ def choose_next(strategy, pool: Pool, config, seed, trainer: Trainer, budgets, s
   inputs = strategies.Inputs(
       model=model, train_cameras=stack_cameras([s.camera for s in selected]),
       candidates=pool.candidates.cameras, available=available, sphere=pool.sphere,
-      bounds=pool.bounds, background=pool.background,
-      settings={"start": scoring_start(config), **budgets},
-      max_views=int(config.max_views))
-  key = jax.random.fold_in(jax.random.PRNGKey(int(seed)), strategies.NAMES.index(
-      strategy.name) if strategy.name in strategies.NAMES else 99)
-  choice = strategy.select(inputs, jax.random.fold_in(key, len(selected)))
-  budgets.update(choice.info.get("settings", {}))
-  return choice
+      bounds=pool.bounds, background=pool.background, budgets=budgets,
+      start=scoring_start(config), max_views=int(config.max_views))
+  return strategy.select(inputs, strategies.strategy_key(seed, strategy.name, len(selected)))
 
 
-def plan_views(strategy, pool: Pool, config, seed, trainer: Trainer, budgets, on_round=None):
+def plan_views(strategy, pool: Pool, config, seed, trainer: Trainer, budgets=Budgets(),
+               on_round=None):
   """Runs one strategy for one seed up to `config.max_views` views.
 
   Args:
@@ -294,11 +290,11 @@ def plan_views(strategy, pool: Pool, config, seed, trainer: Trainer, budgets, on
     config: planning config.
     seed: int.
     trainer: `Trainer` (models, caches).
-    budgets: {purpose: RenderSettings} shared across strategies; updated in place.
+    budgets: `Budgets` to start from.
     on_round: optional callback(round_index, selected list) after every added view.
 
   Returns:
-    list of `Selected`, the initial view first.
+    (list of `Selected`, the initial view first; the `Budgets` that sufficed).
   """
   if strategy.new_poses and pool.oracle is None:
     raise ValueError(f"strategy {strategy.name} proposes new poses; the pool "
@@ -309,8 +305,10 @@ def plan_views(strategy, pool: Pool, config, seed, trainer: Trainer, budgets, on
   available = np.ones(len(cands), bool)
   available[first] = False
   while len(selected) < int(config.max_views):
+    interrupts.check(f"in round {len(selected)} of {strategy.name}, seed {seed}")
     t0 = time.perf_counter()
     choice = choose_next(strategy, pool, config, seed, trainer, budgets, selected, available)
+    budgets = choice.budgets
     if choice.index is not None:
       image = np.asarray(cands.images[choice.index])
       available[choice.index] = False
@@ -330,7 +328,20 @@ def plan_views(strategy, pool: Pool, config, seed, trainer: Trainer, budgets, on
                              time.perf_counter() - t0, info))
     if on_round is not None:
       on_round(len(selected) - 1, selected)
-  return selected
+  return selected, budgets
+
+
+def run_name(strategy, seed):
+  """A run's file name in `runs/` (without `.json`)."""
+  return f"{strategy}-seed{seed}"
+
+
+def pool_record(pool):
+  """What results.json records of the pool: scene, [width, height], candidate and test counts."""
+  return {"scene": pool.name,
+          "resolution": [int(pool.candidates.images.shape[2]),
+                         int(pool.candidates.images.shape[1])],
+          "num_candidates": len(pool.candidates), "num_test": len(pool.test)}
 
 
 def run_record(strategy, seed, selected, metrics, seconds, pool):
@@ -377,109 +388,103 @@ def run_camera_planning(config, workdir):
   """Runs the protocol for every seed and strategy of `config`; writes and returns results.
 
   Writes to `workdir`: `runs/<strategy>-seed<seed>.json` (as each finishes; existing ones
-  are loaded, not recomputed), `results.json`, `table.md`, `cameras.png`, `landscape.png`
-  (+ `landscape.npz`) and `config.json`, each atomically. An invalid config
-  (`mfsample.planning.config.validate`) and a workdir whose finished runs used another
-  protocol (`workdirs.check_resumable`) are refused before anything is written.
+  are loaded, not recomputed, and a damaged one is reported and recomputed), `results.json`,
+  `table.md`, `cameras.png`, `landscape.png` (+ `landscape.npz`) and `config.json`, each
+  atomically. An invalid config (`mfsample.planning.config.validate`) and a workdir whose
+  finished runs used another protocol are refused before anything is written (`JOB`).
 
   Returns:
     the results dict (as in `results.json`).
   """
-  from tqdm.auto import tqdm
-
   t_start = time.perf_counter()
-  validate(config)
-  workdirs.check_resumable(config, workdir)
-  pool = make_pool(config.data)
-  if int(config.max_views) > len(pool.candidates):
-    raise ValueError(f"config.max_views = {config.max_views}: the pool has only "
-                     f"{len(pool.candidates)} candidates")
-  initial_index(config, 0, len(pool.candidates))  # refuses an initial_view beyond the pool
-  os.makedirs(os.path.join(workdir, "runs"), exist_ok=True)
-  workdir_lib.write_config(config, workdir)
-  names = list(config.strategies)
-  skipped = []
-  if pool.oracle is None:
-    skipped = [n for n in names if strategies.make_strategy(n, config).new_poses]
-    names = [n for n in names if n not in skipped]
-  # Each (seed, strategy) once, even if a caller skipped `validate`.
-  todo = list(dict.fromkeys((int(seed), name) for seed in config.seeds for name in names))
-  eval_views = tuple(int(n) for n in config.eval_views)
-  rounds = int(config.max_views) - 1
-  lpips_fn = None
-  if config.eval.lpips_net:
-    lpips_fn = metrics_lib.make_lpips(config.eval.lpips_net)
-  trainer = Trainer(config, pool)
-  budgets = {}
-  records = []
-  bar = tqdm(total=len(todo) * (rounds + len(eval_views)), desc="camera planning",
-             disable=not config.progress, dynamic_ncols=True)
-  for seed, name in todo:
-    path = os.path.join(workdir, "runs", f"{workdirs.run_name(name, seed)}.json")
-    if os.path.exists(path):
-      with open(path) as f:
-        records.append(json.load(f))
-      bar.update(rounds + len(eval_views))
-      continue
-    strategy = strategies.make_strategy(name, config)
-    bar.set_postfix_str(f"{strategy.label}, seed {seed}")
-    t_run = time.perf_counter()
-    selected = plan_views(strategy, pool, config, seed, trainer, budgets,
-                          on_round=lambda *_: bar.update(1))
-    metrics = {}
-    for n in eval_views:
-      model = trainer.final_model(selected[:n], seed)
-      metrics[n], budgets["eval"] = mean_metrics(
-          model, pool.test, background=pool.background, lpips_fn=lpips_fn,
-          settings=budgets.get("eval") or trainer.settings.get("final"))
-      bar.update(1)
-    record = run_record(strategy, seed, selected, metrics, time.perf_counter() - t_run, pool)
-    write_json(path, record, indent=1)
-    records.append(record)
-  bar.close()
+  with jobs.open_workdir(JOB, config, workdir) as wd:
+    pool = make_pool(config.data)
+    if int(config.max_views) > len(pool.candidates):
+      raise ValueError(f"config.max_views = {config.max_views}: the pool has only "
+                       f"{len(pool.candidates)} candidates")
+    initial_index(config, 0, len(pool.candidates))  # refuses an initial_view beyond the pool
+    wd.write_config()
+    names = list(config.strategies)
+    skipped = []
+    if pool.oracle is None:
+      skipped = [n for n in names if strategies.make_strategy(n, config).new_poses]
+      names = [n for n in names if n not in skipped]
+    # Each (seed, strategy) once, even if a caller skipped `validate`.
+    todo = list(dict.fromkeys((int(seed), name) for seed in config.seeds for name in names))
+    eval_views = tuple(int(n) for n in config.eval_views)
+    rounds = int(config.max_views) - 1
+    lpips_fn = None
+    if config.eval.lpips_net:
+      lpips_fn = metrics_lib.make_lpips(config.eval.lpips_net)
+    trainer = Trainer(config, pool)
+    budgets = Budgets()
+    records = []
+    bar = wd.progress(len(todo) * (rounds + len(eval_views)))
+    for seed, name in todo:
+      entry = f"runs/{run_name(name, seed)}.json"
+      record = wd.read_json(entry)
+      if record is not None:
+        records.append(record)
+        bar.update(rounds + len(eval_views))
+        continue
+      strategy = strategies.make_strategy(name, config)
+      bar.set_postfix_str(f"{strategy.label}, seed {seed}")
+      t_run = time.perf_counter()
+      selected, budgets = plan_views(strategy, pool, config, seed, trainer, budgets,
+                                     on_round=lambda *_: bar.update(1))
+      metrics = {}
+      for n in eval_views:
+        model = trainer.final_model(selected[:n], seed)
+        metrics[n], settings = mean_metrics(
+            model, pool.test, background=pool.background, lpips_fn=lpips_fn,
+            settings=budgets.eval or trainer.settings_of("final"))
+        budgets = budgets.replace(eval=settings)
+        bar.update(1)
+      record = run_record(strategy, seed, selected, metrics, time.perf_counter() - t_run,
+                          pool)
+      wd.write_json(entry, record)
+      records.append(record)
+    bar.close()
 
-  summary = tables.summarise(records, eval_views)
-  labels = {rec["strategy"]: rec["label"] for rec in records}
-  paired = {}
-  if len(config.seeds) > 1:
-    paired = {ref: tables.paired_differences(records, eval_views, ref)
-              for ref in config.paired_references if ref in labels}
-  optimisation = tables.optimisation_summary(records)
-  run_seconds = tables.seconds_summary(records)
-  title = (f"Active camera planning on `{pool.name}`: {len(config.seeds)} seed(s), "
-           f"mean ± std over seeds.")
-  write_text(os.path.join(workdir, "table.md"),
-             tables.report_markdown(summary, paired, optimisation, run_seconds, labels,
-                                    eval_views, title))
-  if config.figures.enabled:
-    figures.camera_figure(records, pool, os.path.join(workdir, "cameras.png"),
-                          seed=int(config.seeds[0]))
-    land = landscape(config, pool, trainer, budgets)
-    with atomic_path(os.path.join(workdir, "landscape.npz")) as tmp:
-      np.savez(tmp, **land)
-    figures.landscape_figure(land, os.path.join(workdir, "landscape.png"))
-  results = {
-      **workdirs.pool_record(pool), "seeds": list(config.seeds), "strategies": names,
-      "skipped_strategies": skipped, "eval_views": list(eval_views),
-      "round_steps": int(config.rounds.steps), "warm_start": bool(config.rounds.warm_start),
-      "final_steps": int(config.final_train.train.num_steps),
-      "summary": summary, "paired_psnr": paired, "optimisation": optimisation,
-      "run_seconds": run_seconds, "runs": records,
-      "seconds_this_call": time.perf_counter() - t_start,
-  }
-  write_json(os.path.join(workdir, "results.json"), results, indent=1)
-  return results
+    summary = tables.summarise(records, eval_views)
+    labels = {rec["strategy"]: rec["label"] for rec in records}
+    paired = {}
+    if len(config.seeds) > 1:
+      paired = {ref: tables.paired_differences(records, eval_views, ref)
+                for ref in config.paired_references if ref in labels}
+    optimisation = tables.optimisation_summary(records)
+    run_seconds = tables.seconds_summary(records)
+    title = (f"Active camera planning on `{pool.name}`: {len(config.seeds)} seed(s), "
+             f"mean ± std over seeds.")
+    wd.write_text("table.md", tables.report_markdown(summary, paired, optimisation,
+                                                     run_seconds, labels, eval_views, title))
+    if config.figures.enabled:
+      figures.camera_figure(records, pool, wd.file("cameras.png"), seed=int(config.seeds[0]))
+      land, budgets = landscape(config, pool, trainer, budgets)
+      wd.save_arrays("landscape.npz", **land)
+      figures.landscape_figure(land, wd.file("landscape.png"))
+    results = {
+        **pool_record(pool), "seeds": list(config.seeds), "strategies": names,
+        "skipped_strategies": skipped, "eval_views": list(eval_views),
+        "round_steps": int(config.rounds.steps), "warm_start": bool(config.rounds.warm_start),
+        "final_steps": int(config.final_train.train.num_steps),
+        "summary": summary, "paired_psnr": paired, "optimisation": optimisation,
+        "run_seconds": run_seconds, "runs": records,
+        "seconds_this_call": time.perf_counter() - t_start,
+    }
+    wd.write_json("results.json", results)
+    return results
 
 
-def landscape(config, pool: Pool, trainer: Trainer, budgets):
+def landscape(config, pool: Pool, trainer: Trainer, budgets: Budgets):
   """U over a latitude-longitude grid of cameras (paper Fig. 7) for the 1-view model.
 
   The model is the first round's stochastic model of the first seed (one training view);
   an optimisation from a random start (Ours (Opt. Rnd.)'s first step) is traced on top.
 
   Returns:
-    dict of arrays: values [nv, nu], u [nu], v [nv], train_uv [1, 2], and (when enabled)
-    trajectory [steps + 1, 2].
+    (dict of arrays: values [nv, nu], u [nu], v [nv], train_uv [1, 2], and (when enabled)
+    trajectory [steps + 1, 2]; the `Budgets` that sufficed).
   """
   seed = int(config.seeds[0])
   cands = pool.candidates
@@ -494,10 +499,11 @@ def landscape(config, pool: Pool, trainer: Trainer, budgets):
   cams = poses.spherical_camera(jnp.asarray(grid.reshape(-1, 2)), sphere)
   z = unc.uncertainty_z(model, int(config.strategy.ours.select_samples),
                         int(config.strategy.ours.z_seed))
-  scores, budgets["landscape"] = unc.score_cameras(
-      model, cams, z, settings=budgets.get("landscape") or budgets.get("score")
-      or trainer.settings.get(("round", "stochastic")),
+  scores, settings = unc.score_cameras(
+      model, cams, z, settings=budgets.first("landscape", "score",
+                                             default=trainer.settings_of(("round", "stochastic"))),
       background=jnp.asarray(pool.background))
+  budgets = budgets.replace(landscape=settings)
   out = {"values": np.asarray(scores.values).reshape(grid.shape[:2]), "u": u, "v": v,
          "train_uv": poses.camera_to_uv(sel[0].camera, pool.sphere.center)[None],
          "candidates_uv": poses.camera_to_uv(cands.cameras, pool.sphere.center)}
@@ -505,9 +511,21 @@ def landscape(config, pool: Pool, trainer: Trainer, budgets):
     strategy = strategies.make_strategy("ours_opt_rnd", config)
     inputs = strategies.Inputs(model, stack_cameras([sel[0].camera]), cands.cameras,
                                np.ones(len(cands), bool), pool.sphere, pool.bounds,
-                               pool.background, {"start": scoring_start(config), **budgets})
-    key = jax.random.fold_in(jax.random.PRNGKey(seed), 1234)
+                               pool.background, budgets, scoring_start(config))
+    key = jax.random.fold_in(jax.random.PRNGKey(seed), LANDSCAPE_STREAM)
     choice = strategy.select(inputs, key)
     out["trajectory"] = choice.info["trajectory"]
     out["trajectory_values"] = choice.info["values"]
-  return out
+    budgets = choice.budgets
+  return out, budgets
+
+
+# The random stream of the landscape's trajectory (apart from every strategy's).
+LANDSCAPE_STREAM = 1234
+# Fields a later call on the same workdir may change: which runs to do (seeds, strategies),
+# presentation, and the training configs' speed-only fields.
+FREE_FIELDS = ("seeds", "strategies", "progress", "figures", "data.progress",
+               "paired_references") + speed_only_fields("round_train") + speed_only_fields(
+                   "final_train")
+JOB = jobs.Job("camera planning", run_camera_planning, validate, FREE_FIELDS, ("runs",),
+               report=jobs.table_report)

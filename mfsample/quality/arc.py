@@ -57,6 +57,9 @@ def arc_views(data, scene_name):
     (`Views` [num_views] with images, alphas, depths, cameras; (low [3], high [3]), the box
     of the scene where the models' random initial points go).
   """
+  if data.kind not in ARC_KINDS:
+    raise ValueError(f"data.kind must be one of {', '.join(map(repr, ARC_KINDS))}, got "
+                     f"{data.kind!r}")
   cameras = arc_cameras(data.arc, data.width, data.height)
   if data.kind == "scene":
     from mfsample import scenes
@@ -68,9 +71,12 @@ def arc_views(data, scene_name):
                                  background=tuple(data.background), progress=data.progress)
     c, r = np.asarray(scene.center, np.float64), float(scene.radius)
     return views, (c - r, c + r)
-  if data.kind == "synthetic":
-    return _synthetic_views(data, cameras)
-  raise ValueError(f"data.kind must be 'scene' or 'synthetic', got {data.kind!r}")
+  return _synthetic_views(data, cameras)
+
+
+# Where the arc's views come from: a built-in Mitsuba scene (exact depth from the oracle) or
+# a synthetic shell rendered by mfsample.
+ARC_KINDS = ("scene", "synthetic")
 
 
 def _synthetic_views(data, cameras):

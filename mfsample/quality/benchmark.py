@@ -16,7 +16,6 @@ a JSON record and the maps as .npz for the figures), so a killed run resumes wit
 finished models.
 """
 
-import json
 import os
 import tempfile
 import time
@@ -25,17 +24,16 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from mfsample import metrics
+from mfsample import interrupts, metrics
 from mfsample import uncertainty as unc
-from mfsample._json import write_json
 from mfsample.baselines import activenerf, fisher
+from mfsample.mean_render import render_mean
+from mfsample.model import STOCHASTIC_KINDS
 from mfsample.planning import training
 from mfsample.quality import arc as arc_lib
 from mfsample.quality import maps as maps_lib
 from mfsample.renderer.budget import render_with_budget
-from mfsample.train.evaluate import render_mean
 
-SAMPLER_KINDS = ("lowrank", "diagonal", "block")
 POSTHOC = "posthoc"
 BASELINES = ("fisher", "activenerf", POSTHOC)
 DETERMINISTIC = "deterministic"
@@ -44,10 +42,10 @@ POSTHOC_MAPS = ("posthoc_colour", "posthoc_depth")
 
 
 def parse_sampler(flag):
-  """"kind" or "kind:k" -> (kind, k or None), kind one of `SAMPLER_KINDS`."""
+  """"kind" or "kind:k" -> (kind, k or None), kind one of `mfsample.model.STOCHASTIC_KINDS`."""
   kind, _, rank = str(flag).partition(":")
-  if kind not in SAMPLER_KINDS:
-    raise ValueError(f"sampler {flag!r}: the kind must be one of {', '.join(SAMPLER_KINDS)}")
+  if kind not in STOCHASTIC_KINDS:
+    raise ValueError(f"sampler {flag!r}: the kind must be one of {', '.join(STOCHASTIC_KINDS)}")
   if rank and (not rank.isdigit() or int(rank) < 1):
     raise ValueError(f"sampler {flag!r}: the rank after ':' must be an integer >= 1")
   return kind, (int(rank) if rank else None)
@@ -239,38 +237,43 @@ def _method_maps(config, name, model, settings, train_views, test_views, seed):
   return out, settings, extra
 
 
-def _save_arrays(path, arrays):
-  """np.savez_compressed, atomically (a temporary file renamed)."""
-  tmp = f"{path}.tmp.npz"
-  np.savez_compressed(tmp, **arrays)
-  os.replace(tmp, path)
-
-
 def _complete(record, config):
   """Whether a stored record holds every map the config asks of its model."""
   return set(method_keys(config, record["model"])) <= set(record["methods"])
 
 
-def run_ause(config, workdir, bar=None):
-  """Runs (or resumes) the AUSE benchmark of `config` in `workdir/ause`.
+def run_ause(config, wd, bar=None):
+  """Runs (or resumes) the AUSE benchmark of `config` in the workdir's `ause/`.
+
+  A unit (scene, seed, model) is its record `ause/<unit>.json` and its arrays
+  `ause/<unit>.npz`; one that is missing, damaged (reported) or lacks a map the config asks
+  for is computed again.
+
+  Args:
+    config: the uncertainty-quality config.
+    wd: the `mfsample.jobs.Workdir`.
+    bar: optional progress bar (one step per unit).
 
   Returns:
     {"records": list of records (each with "scene" and "seed"), "views": {scene: (train
-    `Views`, test `Views`)}}.
+    `Views`, test `Views`)}, "arrays": {(scene, seed, model): the unit's arrays}}.
   """
   a = config.ause
-  os.makedirs(os.path.join(workdir, "ause"), exist_ok=True)
   train_idx, test_idx = arc_lib.split(config.data.arc.num_views)
-  records, scene_views = [], {}
+  records, scene_views, unit_arrays = [], {}, {}
   for scene in a.scenes:
     views, bounds = arc_lib.arc_views(config.data, scene)
     train_views, test_views = views.subset(train_idx), views.subset(test_idx)
     scene_views[scene] = (train_views, test_views)
     for seed in a.seeds:
       for name in model_names(config):
-        stem = os.path.join(workdir, "ause", unit_name(scene, seed, name))
-        record = _load(stem + ".json")
-        if record is None or not _complete(record, config) or not os.path.exists(stem + ".npz"):
+        stem = os.path.join("ause", unit_name(scene, seed, name))
+        record = wd.read_json(stem + ".json")
+        arrays = None
+        if record is not None and _complete(record, config):
+          arrays = wd.load_arrays(stem + ".npz", keys=_array_keys(config, name))
+        if arrays is None:
+          interrupts.check(f"before {stem}")
           if bar is not None:
             bar.set_postfix_str(f"{scene}, seed {seed}, {name}")
           t0 = time.perf_counter()
@@ -281,16 +284,16 @@ def run_ause(config, workdir, bar=None):
                                           int(seed))
           record.update(scene=scene, seed=int(seed), train_views=train_idx.tolist(),
                         test_views=test_idx.tolist(), seconds=time.perf_counter() - t0)
-          _save_arrays(stem + ".npz", arrays)
-          write_json(stem + ".json", record, indent=1)  # last: marks the unit done
+          wd.save_arrays(stem + ".npz", **arrays)
+          wd.write_json(stem + ".json", record)  # last: marks the unit done
         records.append(record)
+        unit_arrays[(scene, int(seed), name)] = arrays
         if bar is not None:
           bar.update(1)
-  return {"records": records, "views": scene_views}
+  return {"records": records, "views": scene_views, "arrays": unit_arrays}
 
 
-def _load(path):
-  if not os.path.exists(path):
-    return None
-  with open(path) as f:
-    return json.load(f)
+def _array_keys(config, name):
+  """The arrays a unit of model `name` holds."""
+  return ("render", "depth_error", "mask") + tuple(f"map_{k}" for k in method_keys(config,
+                                                                                    name))

@@ -19,15 +19,15 @@ it finishes (`candidates/<case>.json`), so a killed run resumes.
 """
 
 import itertools
-import json
 import os
 import time
 
 import numpy as np
 
+from mfsample import interrupts
 from mfsample import uncertainty as unc
-from mfsample._json import write_json
 from mfsample.quality.benchmark import parse_sampler
+from mfsample.renderer.budget import Budgets
 
 # What a row varies; `paired` pairs each with its first value, the others held equal.
 SETTINGS = ("round_steps", "sampler", "samples")
@@ -40,16 +40,18 @@ def farthest_views(pool, planning, seed, num_views):
   cfg = planning.copy_and_resolve_references()
   with cfg.unlocked():
     cfg.max_views = int(num_views)
-  return runner.plan_views(strategies.make_strategy("farthest", cfg), pool, cfg, seed,
-                           runner.Trainer(cfg, pool), budgets={})
+  selected, _ = runner.plan_views(strategies.make_strategy("farthest", cfg), pool, cfg, seed,
+                                  runner.Trainer(cfg, pool))
+  return selected
 
 
 def case_name(steps, sampler, seed, views):
   return f"steps{int(steps)}-{sampler.replace(':', '')}-seed{int(seed)}-views{int(views)}"
 
 
-def run_candidates(config, workdir, bar=None):
-  """Runs (or resumes) the candidates part of `config` in `workdir/candidates`.
+def run_candidates(config, wd, bar=None):
+  """Runs (or resumes) the candidates part of `config` in the workdir's `candidates/`
+  (`wd`: a `mfsample.jobs.Workdir`; a missing or damaged case is computed again).
 
   Returns:
     {"scene", "seeds", "view_counts", "cases_per_row", "rows", "paired"}: a row per (round
@@ -64,7 +66,6 @@ def run_candidates(config, workdir, bar=None):
   planning = c.planning.copy_and_resolve_references()
   with planning.unlocked():
     planning.data.progress = bool(config.progress) and bool(planning.data.progress)
-  os.makedirs(os.path.join(workdir, "candidates"), exist_ok=True)
   pool = make_pool(planning.data)
   counts = [int(v) for v in c.views]
   seeds = [int(s) for s in c.seeds]
@@ -79,16 +80,14 @@ def run_candidates(config, workdir, bar=None):
       if rank is not None:
         cfg.round_train.sampler.rank = rank
     trainer = runner.Trainer(cfg, pool)
-    settings = {}
+    budgets = Budgets()
     for seed, n in itertools.product(seeds, counts):
-      path = os.path.join(workdir, "candidates", case_name(steps, sampler, seed, n) + ".json")
-      record = None
-      if os.path.exists(path):
-        with open(path) as f:
-          record = json.load(f)
-        if not {str(m) for m in samples} <= set(record["by_samples"]):
-          record = None  # an M asked for now was not measured then
+      entry = os.path.join("candidates", case_name(steps, sampler, seed, n) + ".json")
+      record = wd.read_json(entry)
+      if record is not None and not {str(m) for m in samples} <= set(record["by_samples"]):
+        record = None  # an M asked for now was not measured then
       if record is None:
+        interrupts.check(f"before {entry}")
         if bar is not None:
           bar.set_postfix_str(f"{steps} steps, {sampler}, seed {seed}, {n} views")
         if seed not in trajectories:
@@ -98,20 +97,25 @@ def run_candidates(config, workdir, bar=None):
         model = trainer.round_model(kind, selected, seed)
         train_seconds = time.perf_counter() - t0
         by_samples = {}
+        used = [v.index for v in selected]
+        unused = np.setdiff1d(np.arange(len(pool.candidates)), used)
         for m in samples:
           z = unc.uncertainty_z(model, m, int(cfg.strategy.ours.z_seed))
-          res = u_against_error(model, pool.candidates, [v.index for v in selected], z,
-                                background=pool.background, center=pool.sphere.center,
+          res = u_against_error(model, pool.candidates.cameras[unused], z,
+                                background=pool.background,
+                                images=np.asarray(pool.candidates.images)[unused],
+                                train_cameras=pool.candidates.cameras[np.asarray(used)],
+                                center=pool.sphere.center,
                                 score_downscale=int(cfg.strategy.ours.score_downscale),
-                                settings=settings)
-          settings = res.settings
+                                budgets=budgets)
+          budgets = res.budgets
           by_samples[str(m)] = {"rho_u_error": res.rho_u_error,
                                 "rho_u_angle": res.rho_u_angle,
                                 "rho_error_angle": res.rho_error_angle}
         record = {"round_steps": steps, "sampler": sampler, "seed": seed, "views": n,
                   "indices": [v.index for v in selected], "train_seconds": train_seconds,
                   "by_samples": by_samples}
-        write_json(path, record, indent=1)
+        wd.write_json(entry, record)
       cases[(steps, sampler, seed, n)] = record
       if bar is not None:
         bar.update(1)

@@ -14,10 +14,17 @@ sized to finish within about 20 minutes on two CPU cores. `configs/uncertainty_q
 selects variants (the candidates part, a tiny one for tests); every number is a field below.
 """
 
+import math
+
 import ml_collections
 
+from mfsample import config_checks as cc
 from mfsample.baselines.fisher import DEFAULT_GROUPS as FISHER_GROUPS
+from mfsample.data import FILE_KINDS
+from mfsample.planning import config as planning_variants
 from mfsample.planning.config import default_config as planning_config
+from mfsample.quality.arc import ARC_KINDS
+from mfsample.quality.benchmark import BASELINES, parse_sampler
 from mfsample.train.config import default_config as training_config
 
 
@@ -136,3 +143,150 @@ def default_config():
   c.seeds = (0, 1)  # Seeds (initial view, model initialisation).
   c.views = (1, 3, 6, 9)  # Training-view counts (cuts of each seed's trajectory).
   return config
+
+
+def validate(config):
+  """Checks every field the experiment reads; `ConfigError` naming the field and its range."""
+  a, d = config.ause, config.data
+  if not (a.enabled or config.candidates.enabled):
+    raise cc.ConfigError("config.ause.enabled and config.candidates.enabled are both "
+                             "False: nothing to run")
+  if a.enabled:
+    cc.check_choice(config, "data.kind", ARC_KINDS)
+    if d.kind == "scene":
+      from mfsample.scenes import SCENES
+      cc.check_sequence(config, "ause.scenes", item_choices=SCENES, distinct=True)
+    else:
+      cc.check_sequence(config, "ause.scenes", distinct=True)
+    cc.check_sequence(config, "ause.seeds", item_minimum=0, distinct=True)
+    _check_samplers(config, "ause.samplers", min_length=0)
+    cc.check_sequence(config, "ause.baselines", item_choices=BASELINES,
+                          min_length=0, distinct=True)
+    if not (a.samplers or a.baselines):
+      raise cc.ConfigError("config.ause.samplers and config.ause.baselines are both "
+                               "empty: no method to measure")
+    _check_samplers(config, "ause.posthoc_sampler", min_length=1, single=True)
+    cc.check_int(config, "ause.posthoc_steps", minimum=1)
+    cc.check_int(config, "ause.samples", minimum=2)
+    cc.check_int(config, "ause.z_seed", minimum=0)
+    cc.check_int(config, "data.width", minimum=1)
+    cc.check_int(config, "data.height", minimum=1)
+    spp = cc.check_int(config, "data.spp", minimum=1)
+    if math.isqrt(spp) ** 2 != spp:
+      raise cc.ConfigError(f"config.data.spp = {spp}: must be a perfect square (the "
+                               "stratified sampler's grid)")
+    views = cc.check_int(config, "data.arc.num_views", minimum=3)
+    if views % 2 == 0:
+      raise cc.ConfigError(f"config.data.arc.num_views = {views}: must be odd (the "
+                               "first and the last view train)")
+    cc.check_float(config, "data.arc.span_deg", above=0.0, maximum=360.0)
+    cc.check_float(config, "data.arc.polar_deg", above=0.0, below=180.0)
+    cc.check_float(config, "data.arc.distance", above=0.0)
+    cc.check_float(config, "data.arc.fov_deg", above=0.0, below=180.0)
+    cc.check_float(config, "mask.true_alpha_min", above=0.0, maximum=1.0)
+    cc.check_float(config, "mask.model_alpha_min", minimum=0.0, below=1.0)
+    steps = cc.check_int(config, "train.train.num_steps", minimum=1)
+    if int(config.train.densify.start) < steps:
+      raise cc.ConfigError(
+          f"config.train.densify.start = {config.train.densify.start}: the models train "
+          f"with fixed shapes; it must be >= config.train.train.num_steps ({steps})")
+    cc.check_int(config, "fisher.train_probes", minimum=1)
+    cc.check_int(config, "fisher.pixel_probes", minimum=1)
+    cc.check_float(config, "fisher.reg", above=0.0)
+    cc.check_int(config, "activenerf.steps", minimum=1)
+    cc.check_float(config, "activenerf.lr", above=0.0)
+    cc.check_float(config, "activenerf.prior_var", above=0.0)
+    cc.check_float(config, "activenerf.beta_min", above=0.0)
+    cc.check_float(config, "activenerf.prior_weight", minimum=0.0)
+    cc.check_int(config, "figures.test_view", minimum=0, maximum=views // 2 - 1)
+  if config.candidates.enabled:
+    cc.check_sequence(config, "candidates.steps", item_minimum=1, distinct=True)
+    _check_samplers(config, "candidates.samplers", min_length=1)
+    cc.check_sequence(config, "candidates.samples", item_minimum=2, distinct=True)
+    cc.check_sequence(config, "candidates.seeds", item_minimum=0, distinct=True)
+    counts = cc.check_sequence(config, "candidates.views", item_minimum=1, distinct=True)
+    planning = config.candidates.planning
+    if planning.data.kind not in FILE_KINDS and max(counts) >= int(planning.data.num_candidates):
+      raise cc.ConfigError(
+          f"config.candidates.views = {tuple(counts)}: every count must leave unused "
+          f"candidates (< candidates.planning.data.num_candidates = "
+          f"{planning.data.num_candidates})")
+
+
+def _check_samplers(config, field, min_length, single=False):
+  """Sampler flags ("kind" or "kind:k"); `single`: one flag (a string field), not a sequence."""
+  if single:
+    flags = (cc.get_field(config, field),)
+  else:
+    flags = cc.check_sequence(config, field, min_length=min_length, distinct=True)
+  for flag in flags:
+    try:
+      parse_sampler(flag)
+    except ValueError as e:
+      raise cc.ConfigError(f"config.{field}: {e}") from None
+
+
+# ----------------------------------------------------------------- variants
+
+
+def candidates(config):
+  """The candidates part alone."""
+  config.ause.enabled = False
+  config.candidates.enabled = True
+
+
+def lego(config):
+  """The candidates part on lego's fixed pool (its 100 training views, rounds at 40 x 40)."""
+  candidates(config)
+  planning_variants.lego(config.candidates.planning)
+
+
+def posthoc(config):
+  """Ours, rank 2, trained jointly against post-hoc: B_hat fitted to the deterministic model
+  with its mean frozen (`ause.posthoc_sampler`, `ause.posthoc_steps`); the protocol as the
+  default otherwise."""
+  config.ause.samplers = ("lowrank:2",)
+  config.ause.baselines = ("posthoc",)
+
+
+def tiny(config):
+  """Both parts at a tiny size: random Gaussians at 24 x 24, the planning tiny rounds.
+
+  The models train with the round config of `configs/camera_planning.py:tiny` (100 steps,
+  3 views), so tests share one compilation of the training step with the planning tests.
+  """
+  config.progress = False
+  planning = config.candidates.planning
+  planning_variants.tiny(planning)
+  config.ause.scenes = ("synthetic",)
+  config.ause.samplers = ("lowrank:2",)
+  config.ause.samples = 4
+  d = config.data
+  d.kind = "synthetic"
+  d.width = d.height = 24
+  d.arc.num_views = 5
+  d.arc.target = (0.0, 0.0, 0.0)
+  d.arc.distance = 3.0
+  d.arc.polar_deg = 70.0
+  config.mask.true_alpha_min = 0.9  # A shell of Gaussians is never exactly opaque.
+  config.train = planning.round_train.copy_and_resolve_references()
+  config.fisher.train_probes = 2
+  config.fisher.pixel_probes = 4
+  config.activenerf.steps = 4
+  config.figures.test_view = 0
+  config.candidates.enabled = True
+  c = config.candidates
+  c.steps = (int(planning.rounds.steps),)
+  c.samplers = ("lowrank:2",)
+  c.samples = (8, 2)  # M = 8 as the planning tiny variant scores (a shared compilation).
+  c.seeds = (0,)
+  c.views = (1, 2)
+
+
+VARIANTS = {f.__name__: f for f in (candidates, lego, posthoc, tiny)}
+
+
+def get_config(variant=""):
+  """`default_config()` with the comma-separated `variant`s applied (`VARIANTS`)."""
+  return cc.with_variants(default_config(), variant, VARIANTS,
+                            "configs/uncertainty_quality.py")

@@ -13,6 +13,7 @@ import os
 
 import numpy as np
 
+from mfsample._json import atomic_path
 from mfsample.quality.tables import BASELINE_LABELS, MAP_LABELS, model_label
 
 
@@ -33,20 +34,18 @@ def _ranks(values, mask):
   return out
 
 
-def scene_figure(scene, test_views, records, workdir, path, view=0, seed=None):
+def scene_figure(scene, test_views, records, arrays, path, view=0, seed=None):
   """Writes the figure of `scene` (test view `view`, the first seed's models) to `path`.
 
   Args:
     scene: scene name.
     test_views: `Views` of the test cameras (images, depths).
     records: the benchmark's records (the models of this scene are used).
-    workdir: where `ause/<unit>.npz` hold the maps.
+    arrays: {(scene, seed, model): the unit's arrays (render, depth_error, mask, maps)}.
     path: PNG to write.
     view: index among the test views.
     seed: which seed's models (default: the first found).
   """
-  from mfsample.quality.benchmark import unit_name
-
   plt = _plt()
   mine = [r for r in records if r["scene"] == scene]
   if seed is None and mine:
@@ -72,23 +71,22 @@ def scene_figure(scene, test_views, records, workdir, path, view=0, seed=None):
   err_max = 0.0
   loaded = []
   for r in mine:
-    with np.load(os.path.join(workdir, "ause", unit_name(scene, seed, r["model"]) + ".npz")) as f:
-      arrays = {k: f[k] for k in f.files}
-    loaded.append(arrays)
-    err_max = max(err_max, float(np.max(arrays["depth_error"][view][arrays["mask"][view]],
+    unit = arrays[(scene, seed, r["model"])]
+    loaded.append(unit)
+    err_max = max(err_max, float(np.max(unit["depth_error"][view][unit["mask"][view]],
                                         initial=0.0)))
-  for row, (r, arrays) in enumerate(zip(mine, loaded, strict=True), start=1):
-    mask = arrays["mask"][view]
-    axes[row, 0].imshow(arrays["render"][view], interpolation="nearest")
+  for row, (r, unit) in enumerate(zip(mine, loaded, strict=True), start=1):
+    mask = unit["mask"][view]
+    axes[row, 0].imshow(unit["render"][view], interpolation="nearest")
     axes[row, 0].set_ylabel(model_label(r["model"]), fontsize=7)
-    axes[row, 1].imshow(np.where(mask, arrays["depth_error"][view], np.nan), cmap=err_cmap,
+    axes[row, 1].imshow(np.where(mask, unit["depth_error"][view], np.nan), cmap=err_cmap,
                         vmin=0.0, vmax=err_max or 1.0, interpolation="nearest")
     axes[row, 1].set_title(f"depth error (MAE {r['views'][view]['depth_mae'] or 0:.3f})",
                            fontsize=7)
     for col, method in enumerate(r["methods"], start=2):
       ause = r["views"][view]["ause"].get(method, {}).get("mae")
       label = BASELINE_LABELS.get(method) or MAP_LABELS.get(method, method)
-      axes[row, col].imshow(_ranks(arrays[f"map_{method}"][view], mask), cmap=cmap,
+      axes[row, col].imshow(_ranks(unit[f"map_{method}"][view], mask), cmap=cmap,
                             vmin=0.0, vmax=1.0, interpolation="nearest")
       axes[row, col].set_title(f"{label}, AUSE {ause:.2f}" if ause is not None else label,
                                fontsize=7)
@@ -101,6 +99,7 @@ def scene_figure(scene, test_views, records, workdir, path, view=0, seed=None):
   from PIL import Image
 
   buffer.seek(0)
-  Image.open(buffer).convert("RGB").quantize(256, method=Image.Quantize.FASTOCTREE).save(
-      path, optimize=True)
+  with atomic_path(path) as tmp:
+    Image.open(buffer).convert("RGB").quantize(256, method=Image.Quantize.FASTOCTREE).save(
+        tmp, optimize=True)
   return path

@@ -20,6 +20,8 @@ import zlib
 import jax
 import numpy as np
 
+from mfsample._json import atomic_path
+
 _PATTERN = re.compile(r"^ckpt_(\d+)\.npz$")
 
 # What reading a damaged .npz raises: a truncated or overwritten zip (BadZipFile, EOFError,
@@ -58,12 +60,8 @@ def save_checkpoint(directory, state, meta, keep=2):
     raise ValueError("a state leaf may not be called __meta__")
   arrays["__meta__"] = np.asarray(json.dumps(meta))
   path = os.path.join(directory, f"ckpt_{step:08d}.npz")
-  tmp = path + ".tmp"
-  with open(tmp, "wb") as f:
+  with atomic_path(path) as tmp, open(tmp, "wb") as f:
     np.savez(f, **arrays)
-    f.flush()
-    os.fsync(f.fileno())
-  os.replace(tmp, path)
   for old in list_checkpoints(directory)[:-int(keep)]:
     os.remove(old)
   return path

@@ -1,12 +1,9 @@
 """Evaluation of a trained model: test metrics, renders and per-pixel uncertainty maps.
 
-The renders of a model's mean every job uses: `render_mean` (one camera) and
-`render_mean_views` (a batch of cameras, one after another inside one jitted call);
-`mean_metrics` scores a batch of test views at once, `evaluate` view by view with images and
-uncertainty maps.
+`mean_metrics` scores a batch of test views at once (`mfsample.mean_render`), `evaluate`
+view by view with images and uncertainty maps.
 """
 
-import functools
 import os
 import re
 from typing import NamedTuple
@@ -18,8 +15,7 @@ import numpy as np
 from mfsample import metrics
 from mfsample import uncertainty as uncertainty_lib
 from mfsample._json import atomic_path
-from mfsample.model import mean_gaussians
-from mfsample.renderer import render
+from mfsample.mean_render import render_mean, render_mean_views
 from mfsample.renderer.budget import render_with_budget
 
 
@@ -37,25 +33,6 @@ class EvalResult(NamedTuple):
   per_view: dict
   images: np.ndarray
   uncertainty: np.ndarray | None
-
-
-@functools.partial(jax.jit, static_argnames=("settings",))
-def render_mean(model, camera, background, *, settings):
-  """`render` of the model's mean Gaussians (jitted; settings static)."""
-  return render(mean_gaussians(model), camera, background=background, settings=settings)
-
-
-@functools.partial(jax.jit, static_argnames=("settings",))
-def render_mean_views(model, cameras, background, *, settings):
-  """([V, H, W, 3] renders of the mean model clipped to [0, 1], `TileStats` [V]) of a batch
-  of cameras, rendered one after another (`lax.map`: each render skips its unused budget)."""
-  gaussians = mean_gaussians(model)
-
-  def one(camera):
-    out = render(gaussians, camera, background=background, settings=settings)
-    return jnp.clip(out.rgb, 0.0, 1.0), out.stats
-
-  return jax.lax.map(one, cameras)
 
 
 @jax.jit

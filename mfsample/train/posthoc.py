@@ -57,7 +57,7 @@ def posthoc_config(config, ply_path):
     cfg.model.ply_path = str(ply_path)
     cfg.model.sh_degree = degree
     cfg.densify.start = 0
-    cfg.densify.stop = 0  # no host events at all (`loop._host_events`)
+    cfg.densify.stop = 0  # no host events at all (`loop.host_events`)
     cfg.sampler.stochastic_until = None
     if cfg.loss.volume_weight is None:
       cfg.loss.volume_weight = POSTHOC_VOLUME_WEIGHT

@@ -1,0 +1,18 @@
+"""Uncertainty maps and next views: `experiments/next_views.py --config=configs/next_views.py`.
+
+Variants combine, comma-separated (the defaults and a comment on every field:
+`mfsample.next_views.config`), e.g. `--config=configs/next_views.py:colmap,posthoc`:
+
+  (none)   the built-in Mitsuba scene at 64 x 64: a field trained on every 4th of its 100
+           candidate views (2000 steps), the other 75 ranked by U; about 5 minutes of CPU
+           time.
+  colmap   a COLMAP capture in the Mip-NeRF 360 layout at --config.data.path, its images_8,
+           the 3DGS conventions (black background, Gaussians from the SfM points).
+  posthoc  a 3DGS model trained on every view (--config.posthoc.ply): B_hat fitted to it,
+           candidates on a sphere around the scene.
+  tiny     seconds-long: random ground-truth Gaussians at 32 x 32, 40 steps (tests).
+
+docs/your_data.md has the commands.
+"""
+
+from mfsample.next_views.config import VARIANTS, get_config  # noqa: F401 (the variants live there)

@@ -1,0 +1,226 @@
+"""One skeleton for every experiment: validate, the resume guard, progress, atomic results.
+
+An experiment is a `Job`: its name, the function that runs it, `run(config, workdir) ->
+results`, the validator of its config, the config fields a later call on the same workdir may
+change (speed, presentation, which runs to do), the entries of the workdir that hold its
+results, and how its command line reports them. A job's `run` opens its workdir first:
+
+  with jobs.open_workdir(JOB, config, workdir) as wd:   # validated, guarded; nothing written
+    data = load(config)                                  # a missing dataset writes nothing
+    wd.write_config()
+    record = wd.read_json("runs/a.json")                 # None: absent or damaged (reported)
+    ...
+    wd.write_json("runs/a.json", record)                 # atomic
+    return results
+
+and `main(JOB)` is the whole absl entry point (`--config`, `--workdir`). A new experiment is
+a config, a few pure functions, a `Job` and a thin main.
+"""
+
+import contextlib
+import dataclasses
+import json
+import os
+import signal
+import sys
+import warnings
+from collections.abc import Callable
+
+import numpy as np
+
+from mfsample import interrupts
+from mfsample import workdir as workdir_lib
+from mfsample._json import atomic_path, write_json, write_text
+from mfsample.config_checks import ConfigError
+from mfsample.data import DatasetError
+
+
+@dataclasses.dataclass(frozen=True)
+class Job:
+  """An experiment.
+
+  Attributes:
+    name: what it is called in messages and progress bars ("camera planning").
+    run: (config, workdir) -> results dict (it opens the workdir with `open_workdir`).
+    validate: config -> None; raises `mfsample.config_checks.ConfigError` naming the field.
+    free_fields: dotted config fields that may differ between calls on one workdir.
+    results: entries of the workdir (files or folders) that hold results: when one holds
+      something, a call with a config that differs elsewhere is refused.
+    report: optional (results, workdir) -> text that `main` prints.
+    progress_field: the config's flag of the progress bars.
+  """
+
+  name: str
+  run: Callable
+  validate: Callable
+  free_fields: tuple
+  results: tuple
+  report: Callable | None = None
+  progress_field: str = "progress"
+
+
+class Workdir:
+  """The workdir of one call of a job: paths, atomic writes, checked reads, progress bars."""
+
+  def __init__(self, job: Job, config, path):
+    self.job = job
+    self.config = config
+    self.path = os.fspath(path)
+
+  def file(self, *parts):
+    """The path of an entry of the workdir."""
+    return os.path.join(self.path, *parts)
+
+  def exists(self, *parts):
+    return os.path.exists(self.file(*parts))
+
+  def write_config(self):
+    """Records the config beside the results (after the guard and the data loaded)."""
+    os.makedirs(self.path, exist_ok=True)
+    workdir_lib.write_config(self.config, self.path)
+
+  def write_json(self, name, obj, indent=1):
+    """Writes `obj` as JSON to the entry `name`, atomically."""
+    write_json(self.file(name), obj, indent=indent)
+
+  def write_text(self, name, text):
+    write_text(self.file(name), text)
+
+  def read_json(self, name):
+    """The JSON content of the entry `name`; None when it is absent or damaged.
+
+    A damaged file (truncated, not JSON, not an object) is reported by a warning naming it,
+    and the caller computes it again (its atomic rewrite replaces the damaged file).
+    """
+    path = self.file(name)
+    if not os.path.exists(path):
+      return None
+    try:
+      with open(path, encoding="utf-8") as f:
+        value = json.load(f)
+      if not isinstance(value, dict):
+        raise ValueError("not a JSON object")
+    except (OSError, UnicodeDecodeError, ValueError) as e:
+      warnings.warn(f"{path} is damaged ({e}); it is computed again", stacklevel=2)
+      return None
+    return value
+
+  def save_arrays(self, name, **arrays):
+    """Writes `arrays` as a compressed .npz to the entry `name`, atomically."""
+    with atomic_path(self.file(name)) as tmp:
+      np.savez_compressed(tmp, **arrays)
+
+  def load_arrays(self, name, keys=()):
+    """{key: array} of the .npz entry `name`; None when it is absent or damaged (reported by
+    a warning naming it, as `read_json`), or when it lacks one of `keys`."""
+    path = self.file(name)
+    if not os.path.exists(path):
+      return None
+    try:
+      with np.load(path, allow_pickle=False) as data:
+        arrays = {k: data[k] for k in data.files}
+      missing = set(keys) - set(arrays)
+      if missing:
+        raise ValueError(f"missing {sorted(missing)}")
+    except Exception as e:  # noqa: BLE001 - zip, zlib, header and value errors alike
+      warnings.warn(f"{path} is damaged ({type(e).__name__}: {e}); it is computed again",
+                    stacklevel=2)
+      return None
+    return arrays
+
+  def progress(self, total, desc=None, **kwargs):
+    """A tqdm progress bar, shown when the config's progress flag is set."""
+    from tqdm.auto import tqdm
+
+    from mfsample.config_checks import get_field
+
+    return tqdm(total=total, desc=desc or self.job.name, dynamic_ncols=True,
+                disable=not get_field(self.config, self.job.progress_field), **kwargs)
+
+
+def check_workdir(job: Job, config, workdir):
+  """Refuses `workdir` when it holds results of a config that differs from `config` in any
+  field but `job.free_fields` (a stale config.json with no results beside it is replaced).
+
+  Raises:
+    mfsample.workdir.WorkdirError: naming the differing fields, or the unreadable config.json.
+  """
+  workdir_lib.check_same_config(
+      config, workdir, free_fields=job.free_fields,
+      has_results=workdir_lib.holds_results(workdir, *job.results),
+      results=f"{job.name} results",
+      remedy="use a new --workdir, or the config that made them (or remove "
+             + ", ".join(os.path.join(os.fspath(workdir), r) for r in job.results)
+             + " to redo them)")
+
+
+@contextlib.contextmanager
+def open_workdir(job: Job, config, workdir):
+  """Validates `config`, takes the workdir's lock for the block, and refuses a workdir
+  holding results of another config.
+
+  Nothing is written but the lock (`workdir/.lock`, removed at the end, with the folder if
+  the block leaves it empty): the job records its config (`Workdir.write_config`) once its
+  data are loaded.
+
+  Raises:
+    mfsample.config_checks.ConfigError: a field is invalid (named).
+    mfsample.workdir.WorkdirBusyError: another process holds the workdir (named).
+    mfsample.workdir.WorkdirError: see `check_workdir`.
+  """
+  job.validate(config)
+  with workdir_lib.locked(workdir, job.name):
+    check_workdir(job, config, workdir)
+    yield Workdir(job, config, workdir)
+
+
+def table_report(results, workdir):
+  """A job's report when it writes `table.md`: the table and the call's wall-clock."""
+  with open(os.path.join(workdir, "table.md"), encoding="utf-8") as f:
+    table = f.read()
+  return f"{table}\nwall-clock of this call: {results['seconds_this_call']:.0f} s"
+
+
+def main(job: Job):
+  """The absl entry point of `job`: `--config` (an ml_collections config file, with
+  `:variant` and `--config.field=value` overrides) and `--workdir`."""
+  from absl import app, flags
+  from ml_collections import config_flags
+
+  config_flag = config_flags.DEFINE_config_file("config", None, f"The {job.name} config file.",
+                                                lock_config=True)
+  workdir_flag = flags.DEFINE_string("workdir", None, "Output directory.")
+  flags.mark_flags_as_required(["config", "workdir"])
+
+  def run(argv):
+    if len(argv) > 1:
+      raise app.UsageError(f"Unexpected arguments: {argv[1:]}")
+    workdir = workdir_flag.value
+    resume = f"run the same command again to resume (the workdir {workdir} keeps the work done)"
+
+    def on_request(signum):
+      name = signal.Signals(signum).name
+      print(f"\n{job.name}: stopping after the current step ({name}; Ctrl-C again to stop "
+            "at once)", file=sys.stderr, flush=True)
+
+    try:
+      with interrupts.stop_at_safe_points(on_request):
+        results = job.run(config_flag.value, workdir)
+    except interrupts.Interrupted as e:
+      print(f"{job.name}: {e}; {resume}.", file=sys.stderr)
+      sys.exit(e.exit_code)
+    except KeyboardInterrupt:
+      print(f"{job.name}: interrupted; {resume}: what was finished is kept.", file=sys.stderr)
+      sys.exit(130)
+    except USER_ERRORS as e:
+      print(f"{job.name}: {type(e).__name__}: {e}", file=sys.stderr)
+      sys.exit(2)
+    if job.report is not None:
+      print(job.report(results, workdir))
+
+  app.run(run)
+
+
+# Errors in the user's input whose message says all: `main` prints it without a traceback.
+USER_ERRORS = (ConfigError, DatasetError, workdir_lib.WorkdirError,
+               workdir_lib.WorkdirBusyError)

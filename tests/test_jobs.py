@@ -1,0 +1,88 @@
+"""The job skeleton: validation before the guard, checked reads, atomic writes, progress."""
+
+import json
+import os
+
+import ml_collections
+import numpy as np
+import pytest
+
+from mfsample import jobs
+from mfsample.config_checks import ConfigError, check_int
+from mfsample.workdir import WorkdirError
+
+
+def _config(steps=3):
+  config = ml_collections.ConfigDict()
+  config.steps = steps
+  config.progress = False
+  return config
+
+
+def _validate(config):
+  check_int(config, "steps", minimum=1)
+
+
+def _run(config, workdir):
+  with jobs.open_workdir(JOB, config, workdir) as wd:
+    wd.write_config()
+    done = wd.read_json("runs/a.json")
+    if done is None:
+      done = {"value": int(config.steps) * 2}
+      wd.write_json("runs/a.json", done)
+    return done
+
+
+JOB = jobs.Job("toy", _run, _validate, free_fields=("progress",), results=("runs",))
+
+
+def test_a_bad_config_is_refused_before_the_workdir_is_touched(tmp_path):
+  with pytest.raises(ConfigError, match="config.steps = 0"):
+    _run(_config(0), str(tmp_path / "w"))
+  assert not (tmp_path / "w").exists()
+
+
+def test_results_of_another_config_are_refused_and_free_fields_may_differ(tmp_path):
+  workdir = str(tmp_path / "w")
+  assert _run(_config(3), workdir) == {"value": 6}
+  other = _config(3)
+  other.progress = True  # a free field
+  assert _run(other, workdir) == {"value": 6}
+  with pytest.raises(WorkdirError, match=r"differences: steps\)"):
+    _run(_config(4), workdir)
+
+
+def test_a_damaged_record_is_reported_by_name_and_computed_again(tmp_path):
+  workdir = tmp_path / "w"
+  _run(_config(3), str(workdir))
+  (workdir / "runs" / "a.json").write_text('{"value": 6')  # truncated
+  with pytest.warns(UserWarning, match=r"runs/a\.json is damaged"):
+    assert _run(_config(3), str(workdir)) == {"value": 6}
+  assert json.loads((workdir / "runs" / "a.json").read_text()) == {"value": 6}
+  (workdir / "runs" / "a.json").write_text("[1, 2]")  # JSON, but not a record
+  with pytest.warns(UserWarning, match="not a JSON object"):
+    _run(_config(3), str(workdir))
+
+
+def test_arrays_are_written_whole_and_damaged_ones_read_as_missing(tmp_path):
+  wd = jobs.Workdir(JOB, _config(), str(tmp_path))
+  wd.save_arrays("a/x.npz", pred=np.arange(4.0))
+  assert sorted(os.listdir(tmp_path / "a")) == ["x.npz"]  # no temporary left
+  np.testing.assert_array_equal(wd.load_arrays("a/x.npz", keys=("pred",))["pred"],
+                                np.arange(4.0))
+  assert wd.load_arrays("a/missing.npz") is None
+  with pytest.warns(UserWarning, match=r"missing \['other'\]"):
+    assert wd.load_arrays("a/x.npz", keys=("pred", "other")) is None
+  data = (tmp_path / "a" / "x.npz").read_bytes()
+  (tmp_path / "a" / "x.npz").write_bytes(data[: len(data) // 2])
+  with pytest.warns(UserWarning, match=r"a/x\.npz is damaged"):
+    assert wd.load_arrays("a/x.npz", keys=("pred",)) is None
+
+
+def test_progress_bars_follow_the_jobs_flag(tmp_path):
+  config = _config()
+  assert jobs.Workdir(JOB, config, str(tmp_path)).progress(3).disable
+  config.progress = True
+  bar = jobs.Workdir(JOB, config, str(tmp_path)).progress(3)
+  assert not bar.disable
+  bar.close()
