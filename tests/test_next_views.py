@@ -158,3 +158,44 @@ def test_a_workdir_whose_call_failed_early_is_taken_over(tmp_path):
   config.data.path = str(tmp_path / "still_missing")  # a new config, nothing computed yet
   with pytest.raises(FileNotFoundError, match="still_missing"):
     run_uncertainty(config, workdir)
+
+
+@pytest.mark.parametrize("num_candidates", [1, 3, 200])
+def test_figure_lays_out_one_to_hundreds_of_candidates_without_overlapping_text(
+    num_candidates, tmp_path):
+  """Every text of the figure (titles, rank numbers, legends, colour bar ticks and labels)
+  has a box of its own, with one candidate (the centres on a line) as with 200."""
+  import itertools
+
+  import matplotlib.pyplot as plt
+  from matplotlib.text import Text
+
+  from mfsample.next_views.figure import build_figure, next_views_figure
+
+  rng = np.random.default_rng(num_candidates)
+  d = rng.normal(size=(num_candidates, 3))
+  centers = 3.0 * d / np.linalg.norm(d, axis=1, keepdims=True)
+  u = rng.uniform(size=num_candidates)
+  top = top_k(u, 5)
+  k = len(top)
+  kwargs = dict(train_centers=rng.normal(size=(1 if num_candidates == 1 else 4, 3)),
+                candidate_centers=centers, u=u, top=top,
+                top_renders=rng.uniform(size=(k, 12, 16, 3)),
+                top_maps=rng.uniform(size=(k, 12, 16)),
+                top_images=rng.uniform(size=(k, 12, 16, 3)) if num_candidates < 10 else None,
+                test_renders=rng.uniform(size=(2, 12, 16, 3)),
+                test_maps=rng.uniform(size=(2, 12, 16)), title="scene: 1 training view",
+                top_names=[f"frame_{i:05d}" for i in top], test_names=["a", "b"])
+  fig = build_figure(**kwargs)
+  renderer = fig.canvas.get_renderer()
+  texts = [(t.get_text(), t.get_window_extent(renderer)) for t in fig.findobj(Text)
+           if t.get_visible() and t.get_text().strip()]
+  assert {str(r) for r in range(1, k + 1)} <= {t for t, _ in texts}  # every rank numbered
+  assert sum(t.startswith("U = ") for t, _ in texts) == k + 2  # every U map has its U
+  overlaps = [(a, b) for (a, box_a), (b, box_b) in itertools.combinations(texts, 2)
+              if box_a.overlaps(box_b)]
+  assert not overlaps
+  plt.close(fig)
+  if num_candidates == 1:  # the file itself, once
+    path = next_views_figure(tmp_path / "next_views.png", **kwargs)
+    assert path.stat().st_size > 10_000 and not list(tmp_path.glob("*.tmp.*"))

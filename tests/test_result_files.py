@@ -10,3 +10,17 @@ def test_write_json_leaves_no_temporary_file_and_makes_its_folder(tmp_path):
   write_json(str(path), {"a": [1, 2]})
   assert json.loads(path.read_text()) == {"a": [1, 2]}
   assert [p.name for p in path.parent.iterdir()] == ["out.json"]
+
+
+def test_write_json_writes_undefined_numbers_as_null(tmp_path):
+  """Standard JSON: NaN and infinities (Python or numpy) become null, never bare NaN."""
+  import numpy as np
+
+  path = tmp_path / "out.json"
+  write_json(str(path), {"rho": float("nan"), "u": [1.5, np.float32("inf"), -np.inf],
+                         "nested": ({"x": np.float64("nan"), "n": np.int64(3)},),
+                         "ok": np.float32(0.25), "text": "nan"})
+  text = path.read_text()
+  assert "NaN" not in text and "Infinity" not in text
+  assert json.loads(text) == {"rho": None, "u": [1.5, None, None],
+                              "nested": [{"x": None, "n": 3}], "ok": 0.25, "text": "nan"}
