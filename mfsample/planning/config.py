@@ -71,7 +71,8 @@ def default_config():
 
   # ----------------------------------------------------------------- data
   config.data = data = ml_collections.ConfigDict()
-  # "scene" (Mitsuba oracle), "blender" or "colmap" (fixed pools) or "synthetic".
+  # "scene" (Mitsuba oracle), "blender", "colmap" or "nerfstudio" (fixed pools) or
+  # "synthetic".
   data.kind = "scene"
   data.background = (1.0, 1.0, 1.0)  # White, as the captures are composited.
   data.progress = True  # Progress bars of the captures.
@@ -90,7 +91,7 @@ def default_config():
   data.downscale = 5  # Integer image downscale (lego's 400 x 400 files: 80 x 80).
   data.test_every = 4  # Every n-th test view (50 of lego's 200).
   data.bounds = (-1.3, 1.3)  # Cube of the random initial points (NeRF Synthetic's).
-  # kind "colmap": a COLMAP capture at `path` (images_{downscale}/ when downscale > 1);
+  # kind "colmap", "nerfstudio": a capture at `path` (images_{downscale}/ when downscale > 1);
   # every holdout_every-th image by name is a test view, the others the candidates. Round
   # models start from its sparse points with round_train.model.init_from = "points".
   data.holdout_every = 8
@@ -186,7 +187,8 @@ def default_config():
   return config
 
 
-DATA_KINDS = ("scene", "blender", "synthetic")
+DATA_KINDS = ("scene", "blender", "synthetic", "colmap", "nerfstudio")
+FIXED_POOLS = ("blender", "colmap", "nerfstudio")  # their size is known once loaded
 
 
 def validate(config):
@@ -226,7 +228,7 @@ def validate(config):
   for field in ("width", "height", "num_test", "spp", "downscale", "test_every"):
     c.check_int(config, f"data.{field}", minimum=1)
   num_candidates = c.check_int(config, "data.num_candidates", minimum=1)
-  if kind != "blender":  # a blender pool's size is known once loaded (the runner checks)
+  if kind not in FIXED_POOLS:  # a fixed pool's size is known once loaded (the runner checks)
     if max_views > num_candidates:
       raise c.ConfigError(f"config.max_views = {max_views} must be <= config.data."
                           f"num_candidates = {num_candidates} (selection strategies pick "

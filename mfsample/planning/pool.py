@@ -5,9 +5,10 @@
   strategies can run.
 * "blender": a NeRF Synthetic scene on disk (e.g. lego): candidates = the train split,
   test = the test split. No oracle: only the selection strategies run.
-* "colmap": a COLMAP capture (`mfsample.data.load_colmap`): candidates = the images that are
-  not held out (every `holdout_every`-th by name is a test view), its sparse points for
-  round models that start from them. No oracle.
+* "colmap", "nerfstudio": a COLMAP or nerfstudio capture (`mfsample.data.load_colmap`,
+  `load_nerfstudio`): candidates = the images that are not held out (every
+  `holdout_every`-th by name is a test view), its sparse points for round models that start
+  from them. No oracle.
 * "synthetic": random ground-truth Gaussians rendered by `mfsample.render` (tests and the
   notebook): every pose has a ground truth, no files and no Mitsuba needed.
 """
@@ -63,10 +64,10 @@ def make_pool(cfg) -> Pool:
     return _blender_pool(cfg, background)
   if cfg.kind == "synthetic":
     return _synthetic_pool(cfg, background)
-  if cfg.kind == "colmap":
+  if cfg.kind in ("colmap", "nerfstudio"):
     return _colmap_pool(cfg, background)
-  raise ValueError(f"data.kind must be 'scene', 'blender', 'colmap' or 'synthetic', got "
-                   f"{cfg.kind!r}")
+  raise ValueError(f"data.kind must be 'scene', 'blender', 'colmap', 'nerfstudio' or "
+                   f"'synthetic', got {cfg.kind!r}")
 
 
 def _scene_pool(cfg, background):
@@ -119,7 +120,7 @@ def _as_training_data(cfg):
   from mfsample.train.config import default_config
 
   data = default_config().data
-  data.kind = "colmap"
+  data.kind = cfg.kind
   data.path = cfg.path
   data.downscale = int(cfg.downscale)
   data.holdout_every = int(cfg.get("holdout_every", 8))

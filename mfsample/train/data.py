@@ -10,6 +10,8 @@
   `holdout_every`-th image by name is a test view (the Mip-NeRF 360 / 3DGS split), and its
   sparse points come along for `model.init_from = "points"`.
 * "llff": a forward-facing LLFF capture (`mfsample.data.load_llff`), split the same way.
+* "nerfstudio": a nerfstudio capture (`mfsample.data.load_nerfstudio`, ns-process-data's
+  `transforms.json`), split the same way, its `ply_file_path` points as the SfM points.
 """
 
 import os
@@ -39,7 +41,8 @@ class Dataset(NamedTuple):
     bounds: (low [3], high [3]) box for the random initial point cloud
       (`config.init_bounds`; for a Mitsuba scene the cube around its bounding sphere; for a
       COLMAP capture the box of its points, for LLFF that of the views' frusta).
-    points: the sparse SfM `mfsample.data.colmap.PointCloud` of a COLMAP capture, else None.
+    points: the sparse SfM `mfsample.data.colmap.PointCloud` of a COLMAP or nerfstudio
+      capture, else None.
   """
 
   train: Views
@@ -65,11 +68,11 @@ def load_dataset(cfg) -> Dataset:
     train, test = _blender_views(cfg, background)
   elif cfg.kind == "scene":
     train, test, bounds = _scene_views(cfg, background)
-  elif cfg.kind in ("colmap", "llff"):
+  elif cfg.kind in ("colmap", "llff", "nerfstudio"):
     return _capture_dataset(cfg, background)
   else:
-    raise ValueError(f"config.data.kind must be 'synthetic', 'blender', 'scene', 'colmap' or "
-                     f"'llff', got {cfg.kind!r}")
+    raise ValueError(f"config.data.kind must be 'synthetic', 'blender', 'scene', 'colmap', "
+                     f"'llff' or 'nerfstudio', got {cfg.kind!r}")
   return Dataset(train=train, test=test, background=background, bounds=bounds)
 
 
@@ -154,12 +157,13 @@ def holdout_split(num, every):
 
 
 def _capture_dataset(cfg, background):
-  from mfsample.data import load_colmap, load_llff
+  from mfsample.data import load_colmap, load_llff, load_nerfstudio
 
   path = resolve_path(cfg.path)
   points = None
-  if cfg.kind == "colmap":
-    views, points = load_colmap(path, factor=int(cfg.downscale), background=background)
+  if cfg.kind in ("colmap", "nerfstudio"):
+    load = load_colmap if cfg.kind == "colmap" else load_nerfstudio
+    views, points = load(path, factor=int(cfg.downscale), background=background)
     if len(points):
       bounds = points.box()
     else:  # no points: the box around the cameras
