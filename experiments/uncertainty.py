@@ -28,9 +28,17 @@ def main(argv):
         f"{results['test']['psnr']:.2f} dB, mean U {results['test']['mean_u']:.4g}")
   for t in results["top_k"]:
     print(f"  next view {t['rank']}: {t['name']} (U = {t['u']:.4g})")
-  rho = results["next_views"]["rho_u_error"]
-  if rho is not None:
-    print(f"  Spearman rho of U against the model's error over the candidates: {rho:.2f}")
+  nv = results["next_views"]
+  if nv["candidates"] == "unused":  # candidates with images: U against the model's error
+    rho = nv["rho_u_error"]
+    print("  Spearman rho of U against the model's error over the candidates: "
+          + (f"{rho:.2f}" if rho is not None else
+             f"undefined ({nv['num_candidates']} candidate(s); it needs 3 or more whose U and "
+             "error are not all equal)"))
+  files = results.get("files", {})
+  if files:
+    print(f"  viewers: {files['next_views']}/ (cameras.json for SuperSplat, transforms.json and "
+          f"camera_path.json for nerfstudio, COLMAP text), {', '.join(files['uncertainty_ply'])}")
   print(f"written to {_WORKDIR.value}")
 
 

@@ -17,7 +17,11 @@
 The workdir: `config.json` (a later call with a different config is refused, naming the
 fields), `checkpoints/`, `train_log.json`, `point_cloud.ply` (a trained field's mean),
 `test/` (renders, U maps as PNG and `uncertainty.npy`, `metrics.json`), `next_views.json`,
-`next_views.png` and `results.json`. A call on a finished workdir returns its results.
+`next_views/` (the proposals as nerfstudio `transforms.json` and `camera_path.json`, the 3DGS
+`cameras.json` SuperSplat imports, a COLMAP text model, and a mean render and U map each:
+`mfsample.next_views.export`), `uncertainty_ply/` (the model with its uncertainty per
+Gaussian over the candidates: `mfsample.next_views.uncertainty_ply`), `next_views.png` and
+`results.json`. A call on a finished workdir returns its results.
 """
 
 import json
@@ -50,12 +54,13 @@ def check_config(config):
     checks.check_int(config, field, minimum=1)
   checks.check_int(config, "next_views.samples", minimum=2)  # one sample: U = 0
   checks.check_int(config, "eval.save_images", minimum=0)
-  if config.data.kind in ("colmap", "llff"):
+  if config.data.kind in ("colmap", "llff", "nerfstudio"):
     checks.check_int(config, "data.holdout_every", minimum=2)
-  if (config.model.init_from == "points" and config.data.kind != "colmap"
+  if (config.model.init_from == "points" and config.data.kind not in ("colmap", "nerfstudio")
       and not config.posthoc.ply):
     raise checks.ConfigError(f"config.model.init_from = 'points' needs the sparse points of a "
-                             f"COLMAP capture, but config.data.kind = {config.data.kind!r}")
+                             f"COLMAP or nerfstudio capture, but config.data.kind = "
+                             f"{config.data.kind!r}")
   if config.next_views.candidates == "unused" and config.views.train_every == 1:
     raise checks.ConfigError("config.views.train_every = 1 trains on every view and leaves no "
                              "unused candidate: set it > 1 or next_views.candidates = 'sphere'")
@@ -121,6 +126,7 @@ def run_uncertainty(config, workdir):
   proposal = _propose(config, model, dataset, train_idx, unused_idx, center, z, state,
                       background)
   write_json(os.path.join(workdir, "next_views.json"), proposal["record"])
+  files = _viewer_files(config, model, dataset, proposal, z, state, background, workdir)
   if config.next_views.figure:
     from mfsample.next_views.figure import next_views_figure
 
@@ -131,9 +137,12 @@ def run_uncertainty(config, workdir):
         candidate_centers=np.asarray(proposal["cameras"].center), u=proposal["u"],
         top=proposal["top"], top_renders=proposal["renders"], top_maps=proposal["maps"],
         top_images=proposal["images"], test_renders=test["renders"][:shown],
-        test_maps=test["maps"][:shown],
-        title=f"{_scene_name(config)}: {kind} uncertainty, {len(train_views)} training views, "
-              f"next {len(proposal['top'])} of {len(proposal['u'])} candidates")
+        test_maps=test["maps"][:shown], top_names=[proposal["record"]["names"][i]
+                                                   for i in proposal["top"]],
+        test_names=dataset.test.names[:shown] if dataset.test.names else None,
+        title=f"{_scene_name(config)}: {kind} uncertainty, {len(train_views)} training "
+              f"view{'s' if len(train_views) != 1 else ''}, next {len(proposal['top'])} of "
+              f"{len(proposal['u'])} candidate{'s' if len(proposal['u']) != 1 else ''}")
 
   record = proposal["record"]
   results = {
@@ -145,6 +154,7 @@ def run_uncertainty(config, workdir):
                                                    "score_downscale", "rho_u_error",
                                                    "rho_u_angle", "rho_error_angle")},
       "top_k": [{"rank": t["rank"], "name": t["name"], "u": t["u"]} for t in record["top_k"]],
+      "files": files,
       "seconds_this_call": time.perf_counter() - t0,
   }
   write_json(results_path, results)
@@ -154,7 +164,7 @@ def run_uncertainty(config, workdir):
 def _scene_name(config):
   from mfsample.train.data import resolve_path
   kind = config.data.kind
-  if kind in ("blender", "colmap", "llff"):
+  if kind in ("blender", "colmap", "llff", "nerfstudio"):
     return resolve_path(config.data.path).name
   return config.data.scene if kind == "scene" else "synthetic"
 
@@ -236,9 +246,9 @@ def _propose(config, model, dataset, train_idx, unused_idx, center, z, state, ba
   against it: the measure of `mfsample.planning.u_error` (U at the scoring size, the squared
   error at full size, over the unused views; rho with the angle to the nearest training
   view beside it)."""
-  from scipy.stats import spearmanr
   from tqdm.auto import tqdm
 
+  from mfsample.metrics import spearman as rho  # None where undefined (< 3 views, constant)
   from mfsample.next_views.candidates import sphere_candidates, top_k
   from mfsample.planning.poses import angle_to_nearest, downscale_camera
 
@@ -278,7 +288,6 @@ def _propose(config, model, dataset, train_idx, unused_idx, center, z, state, ba
       kept[i] = (_render(model, camera, background, state),
                  np.asarray(_u(model, camera, z, background, state).pixel_map))
   if images is not None:
-    rho = lambda a, b: float(spearmanr(a, b).correlation)
     both = dataset.train.cameras[np.concatenate([train_idx, unused_idx])]
     angle = angle_to_nearest(both, list(range(len(train_idx))), center)[len(train_idx):]
     record.update(rho_u_error=rho(u, error), rho_u_angle=rho(u, angle),
@@ -296,3 +305,33 @@ def _propose(config, model, dataset, train_idx, unused_idx, center, z, state, ba
           "images": None if images is None else images[top],
           "renders": np.stack([kept[i][0] for i in top]),
           "maps": np.stack([kept[i][1] for i in top])}
+
+
+def _viewer_files(config, model, dataset, proposal, z, state, background, workdir):
+  """The proposals as cameras in viewers' formats with a preview each (`next_views/`), and the
+  model's uncertainty per Gaussian over the candidates as .ply files (`uncertainty_ply/`).
+  Returns their paths relative to the workdir."""
+  from mfsample.gaussian_uncertainty import gaussian_uncertainty
+  from mfsample.next_views.export import export_next_views
+  from mfsample.next_views.uncertainty_ply import write_uncertainty_plys
+
+  top = np.asarray(proposal["top"], int)
+  names = [f"{rank + 1:02d}_{proposal['record']['names'][i]}" for rank, i in enumerate(top)]
+  applied = None
+  if config.data.kind == "nerfstudio":  # the capture's, so nerfstudio sees one world
+    from mfsample.data._io import read_json
+    from mfsample.data.nerfstudio import applied_transform
+    from mfsample.train.data import resolve_path
+
+    path = resolve_path(config.data.path)
+    meta = read_json(path if path.suffix == ".json" else path / "transforms.json")
+    applied = applied_transform(meta)[:3] if "applied_transform" in meta else None
+  _, state["settings"] = export_next_views(
+      os.path.join(workdir, "next_views"), model, proposal["cameras"][top], z,
+      settings=state["settings"], background=background, names=names,
+      images=proposal["images"], applied_transform=applied)
+  per_gaussian = gaussian_uncertainty(model, proposal["cameras"], z, settings=state["settings"],
+                                      background=background)
+  plys = write_uncertainty_plys(os.path.join(workdir, "uncertainty_ply"), model, per_gaussian)
+  return {"next_views": "next_views",
+          "uncertainty_ply": [os.path.relpath(p, workdir) for p in plys]}
