@@ -121,3 +121,44 @@ def test_planned_views_from_a_run_record(tmp_path):
   assert np.all(np.asarray(shared.fx) == 30.0)
   with pytest.raises(ValueError, match="distinct"):
     export_cameras(tmp_path, cameras, ["a/b", "a_b"])
+
+
+def test_camera_path_in_the_world_of_a_nerfstudio_model(tmp_path):
+  """dataparser_transforms.json maps the original world to the model's: a capture's camera,
+  moved there (applied_transform undone first), sees every point where it saw it before."""
+  from scipy.spatial.transform import Rotation
+
+  from mfsample.data import export_nerfstudio
+  from mfsample.data.camera_export import (
+    nerfstudio_camera_path,
+    nerfstudio_world,
+    similarity_transform,
+  )
+  from mfsample.data.nerfstudio import NS_PROCESS_DATA_TRANSFORM
+  from mfsample.data.views import Views
+
+  cameras = _cameras(num=2)
+  export_nerfstudio(tmp_path / "capture", Views(np.zeros((2, 30, 40, 3)), cameras),
+                    applied_transform=NS_PROCESS_DATA_TRANSFORM)
+  stored = load_nerfstudio(tmp_path / "capture")[0].cameras  # the capture's own world
+  rot = Rotation.from_euler("xyz", [0.3, -0.5, 1.1]).as_matrix()
+  (tmp_path / "dataparser_transforms.json").write_text(json.dumps(
+      {"transform": np.concatenate([rot, [[0.2], [-1.0], [0.4]]], 1).tolist(), "scale": 0.37}))
+  m = nerfstudio_world(tmp_path / "dataparser_transforms.json", tmp_path / "capture")
+  moved = similarity_transform(stored, m)
+  p = np.random.default_rng(3).uniform(-0.5, 0.5, (10, 3))  # points in the original world
+  p_stored = p @ NS_PROCESS_DATA_TRANSFORM[:, :3].T
+  p_model = 0.37 * (p @ rot.T + [0.2, -1.0, 0.4])
+  for i in range(2):
+    np.testing.assert_allclose(moved[i].project(jnp.asarray(p_model, jnp.float32))[0],
+                               stored[i].project(jnp.asarray(p_stored, jnp.float32))[0],
+                               atol=1e-3)
+  np.testing.assert_allclose(moved.center, 0.37 * (np.asarray(cameras.center) @ rot.T
+                                                   + [0.2, -1.0, 0.4]), atol=1e-5)
+  # The same from exported views' folder to a camera path file.
+  export_cameras(tmp_path / "next", stored, ["a", "b"], images=np.zeros((2, 30, 40, 3)))
+  out = nerfstudio_camera_path(tmp_path / "next", tmp_path / "dataparser_transforms.json",
+                               tmp_path / "capture", tmp_path / "camera_paths" / "next.json")
+  first = np.asarray(json.loads(out.read_text())["camera_path"][0]["camera_to_world"])
+  np.testing.assert_allclose(np.linalg.inv(first.reshape(4, 4) @ np.diag([1.0, -1, -1, 1])),
+                             moved.world_to_camera[0], atol=1e-5)

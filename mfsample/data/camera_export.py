@@ -80,6 +80,55 @@ def vertical_fov_degrees(cameras):
   return np.degrees(2.0 * np.arctan(0.5 * cameras.height / fy))
 
 
+def similarity_transform(cameras, transform):
+  """`cameras` moved by a similarity `transform` ([4, 4]: s R | t, s > 0): centre c -> s R c + t,
+  orientation R_c2w -> R R_c2w; intrinsics unchanged, so a point p and its image M p project
+  to the same pixel (e.g. into the world of a model nerfstudio trained: `nerfstudio_world`)."""
+  m = np.asarray(transform, np.float64)
+  scale = np.cbrt(np.linalg.det(m[:3, :3]))
+  if not np.isfinite(scale) or scale <= 0:
+    raise ValueError(f"transform must be a similarity with a positive scale, got {m.tolist()}")
+  c2w = np.linalg.inv(np.asarray(cameras.world_to_camera, np.float64).reshape(-1, 4, 4))
+  moved = np.einsum("ij,vjk->vik", m, c2w)
+  moved[:, :3, :3] /= scale
+  return Camera.create(np.linalg.inv(moved).astype(np.float32), cameras.fx, cameras.fy,
+                       cameras.cx, cameras.cy, cameras.width, cameras.height)
+
+
+def nerfstudio_world(dataparser_transforms, capture=None):
+  """[4, 4] similarity from a nerfstudio capture's world to that of a model nerfstudio trained.
+
+  nerfstudio's trainers re-centre, orient and scale the capture and save how in their output
+  folder's `dataparser_transforms.json`: {"transform": [3, 4], "scale": s}, which maps the
+  *original* world (before the capture's `applied_transform`) to the model's:
+  p_model = s (T p_original). For cameras in the capture's world (`load_nerfstudio`'s default
+  frame) the capture's `applied_transform` A is undone first: M = diag(s, s, s, 1) T A^-1.
+
+  Args:
+    dataparser_transforms: path of dataparser_transforms.json, or its dict.
+    capture: the capture folder (or its transforms.json) for its applied_transform; None
+      for cameras already in the original world (`load_nerfstudio(..., frame="original")`).
+  """
+  from mfsample.data import _io
+  from mfsample.data.nerfstudio import applied_transform
+
+  meta = (dataparser_transforms if isinstance(dataparser_transforms, dict)
+          else _io.read_json(dataparser_transforms))
+  where = "dataparser_transforms.json" if isinstance(dataparser_transforms, dict) else str(
+      dataparser_transforms)
+  if "transform" not in meta or "scale" not in meta:
+    raise _io.DatasetError(f"{where}: expected 'transform' (3 x 4) and 'scale'.")
+  transform = _io.validate_rigid(meta["transform"], where, "'transform'")
+  scale = _io.number(meta, "scale", where)
+  undo = np.eye(4)
+  if capture is not None:
+    capture = Path(capture)
+    applied = applied_transform(_io.read_json(
+        capture if capture.suffix == ".json" else capture / "transforms.json"), str(capture))
+    undo = np.linalg.inv(applied)
+  return np.diag([scale, scale, scale, 1.0]) @ transform @ undo
+
+
 def camera_path(cameras, *, steps_per_view=1, fps=24.0):
   """nerfstudio's camera-path dict through `cameras`, in their order.
 
@@ -241,3 +290,25 @@ def export_cameras(directory, cameras: Camera, names=None, *, images=None, extra
   out["colmap"] = sparse
   return out
 
+
+
+def nerfstudio_camera_path(views_dir, dataparser_transforms, capture, out, **kwargs):
+  """Rewrites the camera path of exported views for a model nerfstudio trained on `capture`.
+
+  Args:
+    views_dir: a folder written by `export_cameras` (its transforms.json, in the capture's
+      world, e.g. the job's `next_views/`).
+    dataparser_transforms: the trained model's dataparser_transforms.json (`nerfstudio_world`).
+    capture: the nerfstudio capture the model was trained on (its applied_transform).
+    out: the camera path to write (the viewer's "Load Path" lists `capture/camera_paths/`).
+    **kwargs: `camera_path`'s steps_per_view and fps.
+
+  Returns:
+    `out`.
+  """
+  from mfsample.data.nerfstudio import load_nerfstudio
+
+  views, _ = load_nerfstudio(views_dir)
+  world = nerfstudio_world(dataparser_transforms, capture)
+  write_json(out, camera_path(similarity_transform(views.cameras, world), **kwargs))
+  return out
