@@ -4,11 +4,12 @@
 
 Writes a nerfstudio capture of random ground-truth Gaussians (12 views at 64 x 64, laid out
 as ns-process-data lays out a capture), runs the your-data job on it (`data.kind =
-"nerfstudio"`, a field trained on every 2nd view, the other 6 ranked by U), and renders what
+"nerfstudio"`, a field trained on every 2nd of its 9 training views, the other 4 ranked by
+U), and renders what
 the viewers are given: the two .ply files of `uncertainty_ply/` seen from a test view (with
 the project's renderer, as a splat viewer draws them), that view's U map, and the first
-proposed view's preview from `next_views/`. About 3 minutes of CPU time; the figure goes to
-`--out`.
+proposed view's preview from `next_views/`. About 6 minutes on two CPU cores; the figure
+goes to `--out`.
 """
 
 import json
