@@ -257,3 +257,42 @@ def test_a_three_view_nerfstudio_capture_end_to_end(tmp_path):
       env={**os.environ, "PYTHONPATH": str(ROOT)}).stdout  # the tiny variant imports configs/
   assert "undefined (1 candidate(s)" in out and "nan" not in out.lower(), out
   assert "cameras.json for SuperSplat" in out
+
+
+# The real files of ../shared/data/real beside the checkout, or $MFSAMPLE_REAL_DATA.
+BONSAI = pathlib.Path(os.environ.get("MFSAMPLE_REAL_DATA")
+                      or ROOT.parent / "shared" / "data" / "real") / "bonsai_colmap"
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not BONSAI.is_dir(), reason=f"bonsai capture not found at {BONSAI}")
+def test_the_three_frame_bonsai_capture(tmp_path):
+  """The real 3-frame COLMAP capture (Mip-NeRF 360 bonsai) through the colmap variant at
+  the tiny schedule, with an images_8 copy made here: valid JSON, undefined rho, the files."""
+  import shutil
+
+  from PIL import Image
+
+  pytest.importorskip("pycolmap")
+  scene = tmp_path / "bonsai"
+  shutil.copytree(BONSAI / "sparse", scene / "sparse")
+  (scene / "images_8").mkdir(parents=True)
+  for image in sorted((BONSAI / "images").iterdir()):
+    with Image.open(image) as im:
+      im.resize((round(im.width / 8), round(im.height / 8)), Image.BOX).save(
+          scene / "images_8" / (image.stem + ".png"))
+  config = uncertainty_configs.get_config("colmap,tiny")
+  config.data.kind = "colmap"
+  config.data.path = str(scene)
+  config.data.downscale = 8
+  config.model.init_from = "points"
+  config.views.train_every = 4
+  workdir = tmp_path / "work"
+  results = run_uncertainty(config, str(workdir))
+  assert (results["num_train_views"], results["num_test_views"]) == (1, 1)
+  assert results["next_views"]["num_candidates"] == 1
+  assert results["next_views"]["rho_u_error"] is None
+  text = (workdir / "results.json").read_text()
+  assert "NaN" not in text and json.loads(text)["top_k"][0]["name"] == "DSCF5597"
+  assert (workdir / "next_views" / "cameras.json").is_file()
+  assert (workdir / "uncertainty_ply" / "coloured_by_uncertainty.ply").is_file()
