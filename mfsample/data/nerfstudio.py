@@ -125,16 +125,9 @@ def load_nerfstudio(path, *, factor=1, frame="transforms", background=(1.0, 1.0,
     (fx, fy, cx, cy), (cam_w, cam_h) = _pinhole(meta, entry, where)
     file = _frame_image(root, entry["file_path"], factor)
     color, alpha = _io.read_image(file)
-    if size is None:
-      size = color.shape[:2]
-    elif color.shape[:2] != size:
-      raise _io.DatasetError(f"{file}: image is {color.shape[1]}x{color.shape[0]} but the "
-                             f"first frame's is {size[1]}x{size[0]}; all images must share "
-                             "one size.")
-    sx, sy = color.shape[1] / cam_w, color.shape[0] / cam_h
-    if min(cam_w, cam_h) * abs(sx - sy) > 2.0:  # as load_colmap: a resize rounds each side
-      raise _io.DatasetError(f"{file}: image is {color.shape[1]}x{color.shape[0]}, not a "
-                             f"scaled copy of the {cam_w}x{cam_h} of {where}.")
+    size = color.shape[:2] if size is None else size
+    sx, sy = _io.image_scale(file, color.shape[:2], size, (cam_w, cam_h), "the first frame's",
+                             where)
     if "transform_matrix" not in entry:
       raise _io.DatasetError(f"{where} has no 'transform_matrix'.")
     c2w = _io.validate_rigid(entry["transform_matrix"], where, "'transform_matrix'")
