@@ -7,7 +7,8 @@ Variants combine, comma-separated (the defaults and a comment on every field:
            candidate views (2000 steps), the other 75 ranked by U; about 5 minutes of CPU
            time.
   colmap   a COLMAP capture in the Mip-NeRF 360 layout at --config.data.path, its images_8,
-           the 3DGS conventions (black background, Gaussians from the SfM points).
+           the 3DGS conventions (black background, Gaussians from the SfM points); with
+           --config.data.kind=nerfstudio, an ns-process-data capture the same way.
   posthoc  a 3DGS model trained on every view (--config.posthoc.ply): B_hat fitted to it,
            candidates on a sphere around the scene.
   tiny     seconds-long: random ground-truth Gaussians at 32 x 32, 40 steps (tests).

@@ -15,8 +15,10 @@ The public API on one screen:
   run_camera_planning               the active camera planning protocol (the main job)
   testing                           synthetic scenes for tests, benchmarks and notebooks
 
-Subpackages: `renderer` (the renderer's stages and budgets), `train`, `planning`, `data`,
-`scenes` (the Mitsuba capture oracle), `metrics`, `model`, `samplers`.
+Subpackages: `renderer` (the renderer's stages and budgets), `train`, `planning`,
+`lighting`, `quality`, `next_views`, `baselines` (FisherRF, ActiveNeRF, ACP), `data`,
+`scenes` (the Mitsuba capture oracle), `metrics`, `model`, `samplers`, `jobs` (the skeleton
+every experiment runs on); docs/architecture.md maps them all.
 """
 
 # `uncertainty` is the module: exporting its function of the same name would shadow it.

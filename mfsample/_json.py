@@ -4,12 +4,19 @@ Every file a run writes goes through `atomic_path`: the writer fills a temporary
 same folder, which is flushed to disk and renamed over the target (`os.replace`, atomic on
 POSIX). A run killed mid-write leaves the previous file, never a truncated one, and a writer
 that raises leaves no temporary file behind.
+
+JSON is written as the standard defines it: a number that is not finite (an undefined
+statistic, a mean over nothing) becomes `null`, never the bare `NaN` / `Infinity` that Python
+writes by default and that other JSON readers (browsers, jq, most languages) refuse.
 """
 
 import contextlib
 import json
+import math
 import os
 import tempfile
+
+import numpy as np
 
 
 @contextlib.contextmanager
@@ -61,10 +68,31 @@ def write_text(path, text):
     f.write(text)
 
 
+def finite_or_none(obj):
+  """`obj` with every non-finite float (NaN, +-inf; Python or numpy) replaced by None, in
+  dicts, lists and tuples at any depth; numpy scalars become Python numbers. Other values are
+  returned as they are (json.dumps refuses what it cannot write)."""
+  if isinstance(obj, dict):
+    return {key: finite_or_none(value) for key, value in obj.items()}
+  if isinstance(obj, (list, tuple)):
+    return [finite_or_none(value) for value in obj]
+  if isinstance(obj, np.generic) and not isinstance(obj, (np.str_, np.bytes_)):
+    obj = obj.item()
+  if isinstance(obj, float) and not math.isfinite(obj):
+    return None
+  return obj
+
+
+def to_json(obj, indent=2):
+  """Standard JSON text of `obj`: non-finite numbers written as null (`finite_or_none`)."""
+  return json.dumps(finite_or_none(obj), indent=indent, allow_nan=False)
+
+
 def write_json(path, obj, indent=2):
-  """Writes `obj` to `path` as JSON, creating its folder; atomic (a temporary file renamed),
-  so a run killed mid-write leaves the previous file, never a truncated one."""
-  write_text(path, json.dumps(obj, indent=indent))
+  """Writes `obj` to `path` as standard JSON (`to_json`: NaN and infinities become null),
+  creating its folder; atomic (a temporary file renamed), so a run killed mid-write leaves
+  the previous file, never a truncated one."""
+  write_text(path, to_json(obj, indent=indent))
 
 
 def without_fields(d, dotted_fields):

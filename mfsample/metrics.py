@@ -16,6 +16,9 @@ AUSE (area under the sparsification error; `ause`, `sparsification`) measures ho
 uncertainty map ranks the pixels of one image by their error, in the standard definition of
 the radiance-field literature (CF-NeRF, Bayes' Rays, the paper's Table 5): host-side numpy, as
 it sorts.
+
+`spearman` is the rank correlation that says how far a ranking by U follows the error (scipy's,
+with None where it is undefined).
 """
 
 from typing import NamedTuple
@@ -303,3 +306,28 @@ def _tie_averaged(u, values):
   starts = np.flatnonzero(np.r_[True, u_sorted[1:] != u_sorted[:-1]])
   sizes = np.diff(np.r_[starts, u.size])
   return np.repeat(np.add.reduceat(v_sorted, starts) / sizes, sizes)
+
+
+def spearman(a, b):
+  """Spearman's rank correlation of two sequences, or None where it is undefined.
+
+  scipy.stats.spearmanr with ties averaged. Undefined, and None rather than NaN (so that no
+  result file or printout carries a "nan"): fewer than 3 pairs (two points always correlate
+  +-1, which says nothing), either sequence constant, or non-finite values.
+
+  Args:
+    a, b: [N] numbers.
+
+  Returns:
+    rho in [-1, 1] as a float, or None.
+  """
+  from scipy.stats import spearmanr  # host-only dependency, imported where used
+
+  a, b = np.asarray(a, np.float64).ravel(), np.asarray(b, np.float64).ravel()
+  if a.shape != b.shape:
+    raise ValueError(f"spearman needs two sequences of one length, got {a.size} and {b.size}")
+  if a.size < 3 or not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
+    return None
+  if np.all(a == a[0]) or np.all(b == b[0]):
+    return None
+  return float(spearmanr(a, b).statistic)

@@ -1,4 +1,4 @@
-"""Tests of mfsample.train.data: the dataset dispatch on config.data.kind."""
+"""Tests of mfsample.data.datasets: the dataset dispatch on config.data.kind."""
 
 import numpy as np
 import pytest

@@ -562,7 +562,7 @@ PLANNING_BAD = [  # (field, value, message fragment)
     ("max_views", 9, "config.max_views = 9 must be <= config.data.num_candidates = 8"),
     ("initial_view", 8, "config.initial_view = 8 must be < config.data.num_candidates = 8"),
     ("paired_references", ("farthest", "nope"), "'nope' is not one of"),
-    ("data.kind", "colmap", "config.data.kind = 'colmap'"),
+    ("data.kind", "nerf", "config.data.kind = 'nerf'"),
     ("data.num_candidates", 0, "config.data.num_candidates = 0"),
     ("data.synthetic.v_range", (0.6, 0.1), "strictly increasing"),
     ("data.synthetic.distance", 0.4, r"config.data.synthetic.distance = 0.4: must be a finite "
@@ -645,7 +645,7 @@ def _planning_config():
 
 
 def _comparable(results):
-  """results.json less wall-clock, as JSON text (NaN scores compare equal as text)."""
+  """results.json less wall-clock, as JSON text."""
   drop = {"seconds", "round_seconds", "seconds_this_call", "run_seconds"}
 
   def strip(x):

@@ -202,3 +202,15 @@ def test_ause_refuses_bad_input_with_clear_messages():
     metrics.ause(u, e, measure="mse")
   with pytest.raises(ValueError, match="normalize must be one of"):
     metrics.ause(u, e, normalize="min")
+
+
+def test_spearman_is_undefined_with_fewer_than_three_pairs_or_constant_input():
+  assert metrics.spearman([1.0, 2.0, 3.0, 4.0], [10.0, 30.0, 20.0, 40.0]) == pytest.approx(0.8)
+  assert metrics.spearman([1.0, 2.0, 3.0], [3.0, 2.0, 1.0]) == pytest.approx(-1.0)
+  assert metrics.spearman([1.0, 2.0, 2.0], [1.0, 2.0, 3.0]) == pytest.approx(0.8660254)  # ties
+  for a, b in [([1.0], [2.0]), ([1.0, 2.0], [2.0, 1.0]), ([], []),
+               ([0.5, 0.5, 0.5], [1.0, 2.0, 3.0]), ([1.0, 2.0, 3.0], [4.0, 4.0, 4.0]),
+               ([1.0, np.nan, 3.0], [1.0, 2.0, 3.0])]:
+    assert metrics.spearman(a, b) is None, (a, b)
+  with pytest.raises(ValueError, match="one length"):
+    metrics.spearman([1.0, 2.0, 3.0], [1.0, 2.0])

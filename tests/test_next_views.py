@@ -158,3 +158,140 @@ def test_a_workdir_whose_call_failed_early_is_taken_over(tmp_path):
   config.data.path = str(tmp_path / "still_missing")  # a new config, nothing computed yet
   with pytest.raises(FileNotFoundError, match="still_missing"):
     run_next_views(config, workdir)
+
+
+@pytest.mark.parametrize("num_candidates", [1, 3, 200])
+def test_figure_lays_out_one_to_hundreds_of_candidates_without_overlapping_text(
+    num_candidates, tmp_path):
+  """Every text of the figure (titles, rank numbers, legends, colour bar ticks and labels)
+  has a box of its own, with one candidate (the centres on a line) as with 200."""
+  import itertools
+
+  import matplotlib.pyplot as plt
+  from matplotlib.text import Text
+
+  from mfsample.next_views.figure import build_figure, next_views_figure
+
+  rng = np.random.default_rng(num_candidates)
+  d = rng.normal(size=(num_candidates, 3))
+  centers = 3.0 * d / np.linalg.norm(d, axis=1, keepdims=True)
+  u = rng.uniform(size=num_candidates)
+  top = top_k(u, 5)
+  k = len(top)
+  kwargs = dict(train_centers=rng.normal(size=(1 if num_candidates == 1 else 4, 3)),
+                candidate_centers=centers, u=u, top=top,
+                top_renders=rng.uniform(size=(k, 12, 16, 3)),
+                top_maps=rng.uniform(size=(k, 12, 16)),
+                top_images=rng.uniform(size=(k, 12, 16, 3)) if num_candidates < 10 else None,
+                test_renders=rng.uniform(size=(2, 12, 16, 3)),
+                test_maps=rng.uniform(size=(2, 12, 16)), title="scene: 1 training view",
+                top_names=[f"frame_{i:05d}" for i in top], test_names=["a", "b"])
+  fig = build_figure(**kwargs)
+  renderer = fig.canvas.get_renderer()
+  texts = [(t.get_text(), t.get_window_extent(renderer)) for t in fig.findobj(Text)
+           if t.get_visible() and t.get_text().strip()]
+  assert {str(r) for r in range(1, k + 1)} <= {t for t, _ in texts}  # every rank numbered
+  assert sum(t.startswith("U = ") for t, _ in texts) == k + 2  # every U map has its U
+  overlaps = [(a, b) for (a, box_a), (b, box_b) in itertools.combinations(texts, 2)
+              if box_a.overlaps(box_b)]
+  assert not overlaps
+  plt.close(fig)
+  if num_candidates == 1:  # the file itself, once
+    path = next_views_figure(tmp_path / "next_views.png", **kwargs)
+    assert path.stat().st_size > 10_000 and not list(tmp_path.glob("*.tmp.*"))
+
+
+@pytest.mark.slow
+def test_a_three_view_nerfstudio_capture_end_to_end(tmp_path):
+  """A capture of 3 views (as the 3 bonsai frames): one test view, one training view, one
+  candidate. Everything undefined is null, every file a viewer opens is written, and the
+  summary says "undefined" rather than "nan"."""
+  import subprocess
+  import sys
+
+  from mfsample.data import PointCloud, datasets, export_nerfstudio, load_nerfstudio, synthetic
+  from mfsample.data.nerfstudio import NS_PROCESS_DATA_TRANSFORM
+
+  config = next_views_configs.get_config("tiny")
+  dataset = datasets.load_dataset(config.data)
+  xyz = np.asarray(synthetic.synthetic_gaussians(config.data.synthetic.num_gaussians, 0).means)
+  export_nerfstudio(tmp_path / "capture", dataset.train.subset(range(3)),
+                    PointCloud(xyz, np.full_like(xyz, 0.5)),
+                    applied_transform=NS_PROCESS_DATA_TRANSFORM)
+  overrides = {"data.kind": "nerfstudio", "data.path": str(tmp_path / "capture"),
+               "model.init_from": "points"}
+  for field, value in overrides.items():
+    block, leaf = field.split(".")
+    config[block][leaf] = value
+  workdir = tmp_path / "work"
+  results = run_next_views(config, str(workdir))
+  assert (results["num_train_views"], results["num_test_views"]) == (1, 1)
+  assert results["next_views"]["num_candidates"] == 1
+  assert results["next_views"]["rho_u_error"] is None  # one candidate: no rank correlation
+  for name in ("results.json", "next_views.json", "test/metrics.json"):
+    text = (workdir / name).read_text()
+    assert "NaN" not in text and "Infinity" not in text, name
+    json.loads(text)
+  assert (workdir / "next_views.png").stat().st_size > 10_000
+  # The proposal in viewers' formats, in the capture's world: nerfstudio reads it back.
+  views, _ = load_nerfstudio(workdir / "next_views", frame="original")
+  # holdout_every = 8: view 0 tests; views.train_every = 2 of views 1, 2: view 2 is unused.
+  candidate = dataset.train.cameras[2]
+  np.testing.assert_allclose(views.cameras.world_to_camera[0], candidate.world_to_camera,
+                             atol=1e-6)
+  assert views.names == (f"01_{results['top_k'][0]['name']}",)
+  for name in ("camera_path.json", "cameras.json", "sparse/0/images.txt",
+               "uncertainty/01_" + results["top_k"][0]["name"] + ".png", "uncertainty.json",
+               "captured/01_" + results["top_k"][0]["name"] + ".png"):
+    assert (workdir / "next_views" / name).exists(), name
+  assert results["files"]["uncertainty_ply"] == ["uncertainty_ply/coloured_by_uncertainty.ply",
+                                                 "uncertainty_ply/model_colours.ply"]
+  assert all((workdir / p).stat().st_size > 1000 for p in results["files"]["uncertainty_ply"])
+  # The command's summary on the finished workdir (read back, nothing recomputed).
+  flags_ = [f"--config.{k}={v}" for k, v in overrides.items()]
+  env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}  # as a user runs it
+  out = subprocess.run(
+      [sys.executable, str(ROOT / "experiments" / "next_views.py"),
+       f"--config={ROOT / 'configs' / 'next_views.py'}:tiny", f"--workdir={workdir}", *flags_],
+      capture_output=True, text=True, cwd=ROOT, check=True, env=env).stdout
+  assert "undefined (1 candidate(s)" in out and "nan" not in out.lower(), out
+  assert "cameras.json for SuperSplat" in out
+
+
+# The real files of ../shared/data/real beside the checkout, or $MFSAMPLE_REAL_DATA.
+BONSAI = pathlib.Path(os.environ.get("MFSAMPLE_REAL_DATA")
+                      or ROOT.parent / "shared" / "data" / "real") / "bonsai_colmap"
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not BONSAI.is_dir(), reason=f"bonsai capture not found at {BONSAI}")
+def test_the_three_frame_bonsai_capture(tmp_path):
+  """The real 3-frame COLMAP capture (Mip-NeRF 360 bonsai) through the colmap variant at
+  the tiny schedule, with an images_8 copy made here: valid JSON, undefined rho, the files."""
+  import shutil
+
+  from PIL import Image
+
+  pytest.importorskip("pycolmap")
+  scene = tmp_path / "bonsai"
+  shutil.copytree(BONSAI / "sparse", scene / "sparse")
+  (scene / "images_8").mkdir(parents=True)
+  for image in sorted((BONSAI / "images").iterdir()):
+    with Image.open(image) as im:
+      im.resize((round(im.width / 8), round(im.height / 8)), Image.BOX).save(
+          scene / "images_8" / (image.stem + ".png"))
+  config = next_views_configs.get_config("colmap,tiny")
+  config.data.kind = "colmap"
+  config.data.path = str(scene)
+  config.data.downscale = 8
+  config.model.init_from = "points"
+  config.views.train_every = 4
+  workdir = tmp_path / "work"
+  results = run_next_views(config, str(workdir))
+  assert (results["num_train_views"], results["num_test_views"]) == (1, 1)
+  assert results["next_views"]["num_candidates"] == 1
+  assert results["next_views"]["rho_u_error"] is None
+  text = (workdir / "results.json").read_text()
+  assert "NaN" not in text and json.loads(text)["top_k"][0]["name"] == "DSCF5597"
+  assert (workdir / "next_views" / "cameras.json").is_file()
+  assert (workdir / "uncertainty_ply" / "coloured_by_uncertainty.ply").is_file()

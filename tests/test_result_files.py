@@ -37,3 +37,17 @@ def test_temporary_names_are_unique_and_keep_the_extension(tmp_path):
     for t in (one, two):
       with open(t, "w") as f:
         f.write(t)
+
+
+def test_write_json_writes_undefined_numbers_as_null(tmp_path):
+  """Standard JSON: NaN and infinities (Python or numpy) become null, never bare NaN."""
+  import numpy as np
+
+  path = tmp_path / "out.json"
+  write_json(str(path), {"rho": float("nan"), "u": [1.5, np.float32("inf"), -np.inf],
+                         "nested": ({"x": np.float64("nan"), "n": np.int64(3)},),
+                         "ok": np.float32(0.25), "text": "nan"})
+  text = path.read_text()
+  assert "NaN" not in text and "Infinity" not in text
+  assert json.loads(text) == {"rho": None, "u": [1.5, None, None],
+                              "nested": [{"x": None, "n": 3}], "ok": 0.25, "text": "nan"}

@@ -144,6 +144,33 @@ def _pillow_array(image, path):
   return np.asarray(image)
 
 
+def image_scale(file, shape, first, calibrated, first_name, calibrated_for):
+  """(sx, sy): an image's size over the size its camera was calibrated for.
+
+  Args:
+    file: the image file (for messages).
+    shape: its (height, width).
+    first: (height, width) of the capture's first image (all must share one size).
+    calibrated: (width, height) of the camera's calibration.
+    first_name: names the first image in the message.
+    calibrated_for: names the camera in the message ("camera 1 of sparse/0").
+
+  Raises:
+    DatasetError: a size unlike the first image's, or not a scaled copy of the calibrated
+      one. A resized copy keeps the aspect ratio up to rounding (or flooring) each side to
+      whole pixels: one of the two scales then reproduces the other side within 2 pixels.
+  """
+  (h, w), (cam_w, cam_h) = shape, calibrated
+  if tuple(shape) != tuple(first):
+    raise DatasetError(f"{file}: image is {w}x{h} but {first_name} is {first[1]}x{first[0]}; "
+                       "all images must share one size.")
+  sx, sy = w / cam_w, h / cam_h
+  if min(cam_w, cam_h) * abs(sx - sy) > 2.0:
+    raise DatasetError(f"{file}: image is {w}x{h}, not a scaled copy of the {cam_w}x{cam_h} "
+                       f"that {calibrated_for} was calibrated for.")
+  return sx, sy
+
+
 def area_downscale(x, factor, path=None):
   """Box-filters [H, W, ...] by an integer factor (H and W must be divisible by it).
 

@@ -162,19 +162,9 @@ def load_colmap(path, *, factor=1, sparse=None, background=(1.0, 1.0, 1.0)):
     (fx, fy, cx, cy), (cam_w, cam_h) = intrinsics[image.camera_id]
     file = _image_file(image_dir, name)
     color, alpha = _io.read_image(file)
-    if size is None:
-      size = color.shape[:2]
-    elif color.shape[:2] != size:
-      raise _io.DatasetError(f"{file}: image is {color.shape[1]}x{color.shape[0]} but "
-                             f"{entries[0][0]} is {size[1]}x{size[0]}; all images must share "
-                             "one size.")
-    sx, sy = color.shape[1] / cam_w, color.shape[0] / cam_h
-    # A resized copy keeps the aspect ratio up to rounding (or flooring) each side to whole
-    # pixels: one of the two scales then reproduces the other side within 2 pixels.
-    if min(cam_w, cam_h) * abs(sx - sy) > 2.0:
-      raise _io.DatasetError(
-          f"{file}: image is {color.shape[1]}x{color.shape[0]}, not a scaled copy of the "
-          f"{cam_w}x{cam_h} that camera {image.camera_id} of {sparse} was calibrated for.")
+    size = color.shape[:2] if size is None else size
+    sx, sy = _io.image_scale(file, color.shape[:2], size, (cam_w, cam_h), entries[0][0],
+                             f"camera {image.camera_id} of {sparse}")
     where = f"{sparse} image {name!r}"
     w2c = _io.validate_rigid(_pose_matrix(image), where)
     if alpha is not None:

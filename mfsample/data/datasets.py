@@ -28,7 +28,8 @@ class Dataset(NamedTuple):
     bounds: (low [3], high [3]) box for the random initial point cloud
       (`config.init_bounds`; for a Mitsuba scene the cube around its bounding sphere; for a
       COLMAP capture the box of its points, for LLFF that of the views' frusta).
-    points: the sparse SfM `mfsample.data.colmap.PointCloud` of a COLMAP capture, else None.
+    points: the sparse SfM `mfsample.data.colmap.PointCloud` of a COLMAP or nerfstudio
+      capture, else None.
   """
 
   train: Views
@@ -46,11 +47,16 @@ class DataKind(NamedTuple):
     reads_path: whether the dataset is files at `config.data.path` (a fixed pool of views,
       no oracle for new poses).
     summary: one line for the docs and for error messages.
+    holdout: whether its test views are every `holdout_every`-th of one set of images (the
+      Mip-NeRF 360 / 3DGS split of a capture).
+    points: whether it brings sparse SfM points (for `model.init_from = "points"`).
   """
 
   load: object
   reads_path: bool
   summary: str
+  holdout: bool = False
+  points: bool = False
 
 
 def load_dataset(cfg) -> Dataset:
@@ -125,8 +131,21 @@ def _colmap(cfg, background):
   """A COLMAP capture (`load_colmap`): the held-out split, its sparse points and their box."""
   from mfsample.data.colmap import load_colmap
 
-  views, points = load_colmap(resolve_path(cfg.path), factor=int(cfg.downscale),
-                              background=background)
+  return _with_points(cfg, background, load_colmap)
+
+
+def _nerfstudio(cfg, background):
+  """A nerfstudio capture (`load_nerfstudio`, ns-process-data's transforms.json): the
+  held-out split, its `ply_file_path` points and their box."""
+  from mfsample.data.nerfstudio import load_nerfstudio
+
+  return _with_points(cfg, background, load_nerfstudio)
+
+
+def _with_points(cfg, background, load):
+  """A capture with SfM points: the box of its points (of its cameras without points)."""
+  views, points = load(resolve_path(cfg.path), factor=int(cfg.downscale),
+                       background=background)
   if len(points):
     bounds = points.box()
   else:  # no points: the box around the cameras
@@ -195,8 +214,13 @@ DATA_KINDS = {
     "synthetic": DataKind(_synthetic, False, "random Gaussians rendered by mfsample (no files)"),
     "blender": DataKind(_blender, True, "a NeRF Synthetic scene (transforms_*.json)"),
     "scene": DataKind(_scene, False, "a built-in Mitsuba scene, captured on demand"),
-    "colmap": DataKind(_colmap, True, "a COLMAP capture (sparse/0, images_N/)"),
-    "llff": DataKind(_llff, True, "a forward-facing LLFF capture (poses_bounds.npy)"),
+    "colmap": DataKind(_colmap, True, "a COLMAP capture (sparse/0, images_N/)", holdout=True,
+                       points=True),
+    "llff": DataKind(_llff, True, "a forward-facing LLFF capture (poses_bounds.npy)",
+                     holdout=True),
+    "nerfstudio": DataKind(_nerfstudio, True,
+                           "a nerfstudio capture (ns-process-data's transforms.json)",
+                           holdout=True, points=True),
 }
 # The kinds that are files at `config.data.path`: fixed pools of views.
 FILE_KINDS = tuple(name for name, kind in DATA_KINDS.items() if kind.reads_path)

@@ -1,13 +1,12 @@
 """Writes `Views` as a NeRF Synthetic dataset that `load_blender` (and other tools) can read."""
 
-import json
 import math
 from pathlib import Path
 
 import imageio.v3 as iio
 import numpy as np
 
-from mfsample._json import atomic_path, write_text
+from mfsample._json import atomic_path, write_json
 from mfsample.data import _io
 from mfsample.data.blender import GL_TO_CV
 from mfsample.data.views import Views
@@ -81,7 +80,7 @@ def export_blender(path, views: Views, *, split="train", background=(1.0, 1.0, 1
       "frames": frames,
   }
   # The json last (every file is written atomically): it is what marks a split complete.
-  write_text(json_path, json.dumps(meta, indent=2))
+  write_json(json_path, meta)
   return json_path
 
 

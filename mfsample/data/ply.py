@@ -13,6 +13,10 @@ blue). Normals are unused (written as zeros). These are exactly the raw groups o
 `mfsample.model` (`means`, `sh_dc`, `sh_rest`, `opacity_logits`, `log_scales`, `quats`), so
 a file becomes a model's mean without any conversion.
 
+Writing may append extra float properties per Gaussian (`extra`, e.g. the uncertainty of
+`mfsample.gaussian_uncertainty`: `u_share`, `position_std`, `colour_std`) after the standard
+ones; 3DGS tools and splat viewers skip properties they do not know, and so does `load_ply`.
+
 Reading accepts any SH degree 0-3 (told by the number of `f_rest_*` properties), properties
 in any order and of any float type, big- or little-endian data, and ignores properties it does
 not use (normals, colours of point-cloud tools, extra per-Gaussian data). It refuses, naming
@@ -52,12 +56,14 @@ def _plyfile():
 # ------------------------------------------------------------------------- writing
 
 
-def ply_arrays(mean, mask=None):
+def ply_arrays(mean, mask=None, extra=None):
   """{property name: [N] float32} of the live rows of raw parameters `mean`, in file order.
 
   Args:
     mean: {group: [C, ...]} raw parameters (`Model.params.mean`).
     mask: optional [C] bool; only rows where it is True are written.
+    extra: optional {property name: [C] numbers} written after the standard properties
+      (finite values; names other than the layout's own).
   """
   mean = {g: np.asarray(v, np.float32) for g, v in mean.items()}
   live = np.ones(len(mean["means"]), bool) if mask is None else np.asarray(mask, bool)
@@ -78,6 +84,17 @@ def ply_arrays(mean, mask=None):
     out[f"scale_{i}"] = mean["log_scales"][live, i]
   for i in range(4):
     out[f"rot_{i}"] = mean["quats"][live, i]
+  for name, values in (extra or {}).items():
+    values = np.asarray(values, np.float32)
+    if name in out or not name.isidentifier():
+      raise ValueError(f"extra property {name!r} is a property of the 3DGS layout or not a "
+                       "plain name")
+    if values.shape != live.shape:
+      raise ValueError(f"extra property {name!r} has shape {values.shape}, expected "
+                       f"{live.shape} (one value per row of the model)")
+    if not np.all(np.isfinite(values[live])):
+      raise ValueError(f"extra property {name!r} has non-finite values")
+    out[name] = values[live]
   return out
 
 
@@ -97,9 +114,10 @@ def write_ply(path, arrays):
   return path
 
 
-def export_ply(path, model):
-  """Writes the mean of `model` (live Gaussians only) to `path` in the 3DGS layout."""
-  return write_ply(path, ply_arrays(model.params.mean, model.mask))
+def export_ply(path, model, extra=None):
+  """Writes the mean of `model` (live Gaussians only) to `path` in the 3DGS layout, with the
+  `extra` float properties ({name: [C]}) after the standard ones."""
+  return write_ply(path, ply_arrays(model.params.mean, model.mask, extra))
 
 
 def raw_from_gaussians(gaussians):

@@ -4,6 +4,8 @@
 * `config`: its config and defaults (`default_config`), and its validator.
 * `candidates`: poses on a sphere oriented by the capture; the top k by U.
 * `figure`: the job's figure.
+* `export`: the proposals as files viewers open (cameras in their formats, previews).
+* `uncertainty_ply`: the model with its uncertainty per Gaussian as 3DGS .ply files.
 """
 
 from mfsample.next_views.candidates import sphere_candidates, top_k

@@ -14,7 +14,7 @@ selects variants; any field is overridden on the command line, e.g.
 import ml_collections
 
 from mfsample import config_checks as checks
-from mfsample.data import resolve_path
+from mfsample.data import DATA_KINDS, resolve_path
 from mfsample.model import STOCHASTIC_KINDS
 from mfsample.train import config as training_variants
 from mfsample.train.config import default_config as training_config
@@ -84,12 +84,14 @@ def validate(config):
     checks.check_int(config, field, minimum=1)
   checks.check_int(config, "next_views.samples", minimum=2)  # one sample: U = 0
   checks.check_int(config, "eval.save_images", minimum=0)
-  if config.data.kind in ("colmap", "llff"):  # the held-out split of a capture
+  kind = DATA_KINDS[config.data.kind]  # a known kind: checked by the training validator
+  if kind.holdout:  # the held-out split of a capture
     checks.check_int(config, "data.holdout_every", minimum=2)
-  if (config.model.init_from == "points" and config.data.kind != "colmap"
-      and not config.posthoc.ply):
+  if config.model.init_from == "points" and not kind.points and not config.posthoc.ply:
+    with_points = ", ".join(repr(k) for k, v in DATA_KINDS.items() if v.points)
     raise checks.ConfigError(f"config.model.init_from = 'points' needs the sparse points of a "
-                             f"COLMAP capture, but config.data.kind = {config.data.kind!r}")
+                             f"capture ({with_points}), but config.data.kind = "
+                             f"{config.data.kind!r}")
   if config.next_views.candidates == "unused" and config.views.train_every == 1:
     raise checks.ConfigError("config.views.train_every = 1 trains on every view and leaves no "
                              "unused candidate: set it > 1 or next_views.candidates = 'sphere'")

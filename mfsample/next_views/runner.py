@@ -17,9 +17,14 @@
 The workdir: `config.json` (a later call with a different config is refused, naming the
 fields), `checkpoints/`, `train_log.json`, `point_cloud.ply` (a trained field's mean),
 `test/` (renders, U maps as PNG and `uncertainty.npy`, `metrics.json`), `next_views.json`,
-`next_views.png` and `results.json`. A call on a finished workdir returns its results.
+`next_views/` (the proposals as nerfstudio `transforms.json` and `camera_path.json`, the 3DGS
+`cameras.json` SuperSplat imports, a COLMAP text model, and a mean render and U map each:
+`mfsample.next_views.export`), `uncertainty_ply/` (the model with its uncertainty per
+Gaussian over the candidates: `mfsample.next_views.uncertainty_ply`), `next_views.png` and
+`results.json`. A call on a finished workdir returns its results.
 """
 
+import os
 import time
 
 import jax.numpy as jnp
@@ -71,6 +76,7 @@ def run_next_views(config, workdir):
                     + np.asarray(dataset.bounds[1], np.float64))
     proposal = _propose(config, model, dataset, train_idx, unused_idx, center, z, budgets, wd)
     wd.write_json("next_views.json", proposal["record"], indent=2)
+    files, budgets = _viewer_files(config, model, dataset, proposal, z, budgets, wd)
     if config.next_views.figure:
       from mfsample.next_views.figure import next_views_figure
 
@@ -82,8 +88,11 @@ def run_next_views(config, workdir):
           top=proposal["top"], top_renders=proposal["renders"], top_maps=proposal["maps"],
           top_images=proposal["images"], test_renders=test["renders"][:shown],
           test_maps=test["maps"][:shown],
-          title=f"{_scene_name(config)}: {kind} uncertainty, {len(train_views)} training "
-                f"views, next {len(proposal['top'])} of {len(proposal['u'])} candidates")
+          top_names=[proposal["record"]["names"][i] for i in proposal["top"]],
+          test_names=dataset.test.names[:shown] if dataset.test.names else None,
+          title=f"{_scene_name(config)}: {kind} uncertainty, "
+                f"{_count(len(train_views), 'training view')}, next "
+                f"{len(proposal['top'])} of {_count(len(proposal['u']), 'candidate')}")
 
     record = proposal["record"]
     results = {
@@ -96,10 +105,15 @@ def run_next_views(config, workdir):
             "rho_u_angle", "rho_error_angle")},
         "top_k": [{"rank": t["rank"], "name": t["name"], "u": t["u"]}
                   for t in record["top_k"]],
+        "files": files,
         "seconds_this_call": time.perf_counter() - t0,
     }
     wd.write_json("results.json", results, indent=2)
     return results
+
+
+def _count(n, noun):
+  return f"{n} {noun}{'' if n == 1 else 's'}"
 
 
 def _scene_name(config):
@@ -219,16 +233,58 @@ def _propose(config, model, dataset, train_idx, unused_idx, center, z, budgets, 
           "renders": np.stack(renders), "maps": np.stack(maps)}
 
 
+def _viewer_files(config, model, dataset, proposal, z, budgets, wd):
+  """The proposals as cameras in viewers' formats with a preview each (`next_views/`), and the
+  model's uncertainty per Gaussian over the candidates as .ply files (`uncertainty_ply/`).
+
+  Returns:
+    ({"next_views": folder, "uncertainty_ply": [files]}, relative to the workdir; budgets).
+  """
+  from mfsample.gaussian_uncertainty import gaussian_uncertainty
+  from mfsample.next_views.export import export_next_views
+  from mfsample.next_views.uncertainty_ply import write_uncertainty_plys
+
+  top = np.asarray(proposal["top"], int)
+  names = [f"{rank + 1:02d}_{proposal['record']['names'][i]}" for rank, i in enumerate(top)]
+  applied = None
+  if config.data.kind == "nerfstudio":  # the capture's, so nerfstudio sees one world
+    from mfsample.data._io import read_json
+    from mfsample.data.nerfstudio import applied_transform
+
+    path = resolve_path(config.data.path)
+    meta = read_json(path if path.suffix == ".json" else path / "transforms.json")
+    applied = applied_transform(meta)[:3] if "applied_transform" in meta else None
+  background = jnp.asarray(dataset.background, jnp.float32)
+  _, settings = export_next_views(
+      wd.file("next_views"), model, proposal["cameras"][top], z, settings=budgets.eval,
+      background=background, names=names, images=proposal["images"],
+      applied_transform=applied)
+  per_gaussian = gaussian_uncertainty(model, proposal["cameras"], z, settings=settings,
+                                      background=background)
+  plys = write_uncertainty_plys(wd.file("uncertainty_ply"), model, per_gaussian)
+  files = {"next_views": "next_views",
+           "uncertainty_ply": [os.path.relpath(p, wd.path) for p in plys]}
+  return files, budgets.replace(eval=settings)
+
+
 def report(results, workdir):
   """What `experiments/next_views.py` prints: test quality, the proposals, and how far the
   ranking follows the model's error on this capture."""
   lines = [f"{results['kind']} uncertainty of {results['scene']}: test PSNR "
            f"{results['test']['psnr']:.2f} dB, mean U {results['test']['mean_u']:.4g}"]
   lines += [f"  next view {t['rank']}: {t['name']} (U = {t['u']:.4g})" for t in results["top_k"]]
-  rho = results["next_views"]["rho_u_error"]
-  if rho is not None:
-    lines.append(f"  Spearman rho of U against the model's error over the candidates: "
-                 f"{rho:.2f}")
+  nv = results["next_views"]
+  if nv["candidates"] == "unused":  # candidates with images: U against the model's error
+    rho = nv["rho_u_error"]
+    lines.append("  Spearman rho of U against the model's error over the candidates: "
+                 + (f"{rho:.2f}" if rho is not None else
+                    f"undefined ({nv['num_candidates']} candidate(s); it needs 3 or more whose "
+                    "U and error are not all equal)"))
+  files = results.get("files", {})
+  if files:
+    lines.append(f"  viewers: {files['next_views']}/ (cameras.json for SuperSplat, "
+                 "transforms.json and camera_path.json for nerfstudio, COLMAP text), "
+                 + ", ".join(files["uncertainty_ply"]))
   lines.append(f"written to {workdir}")
   return "\n".join(lines)
 

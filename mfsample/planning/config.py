@@ -73,8 +73,8 @@ def default_config():
 
   # ----------------------------------------------------------------- data
   config.data = data = ml_collections.ConfigDict()
-  # "scene" (Mitsuba oracle), "synthetic", or a dataset on disk, "blender", "colmap" or
-  # "llff" (fixed pools): `mfsample.planning.pool.POOL_KINDS`.
+  # "scene" (Mitsuba oracle), "synthetic", or a dataset on disk, "blender", "colmap",
+  # "llff" or "nerfstudio" (fixed pools): `mfsample.planning.pool.POOL_KINDS`.
   data.kind = "scene"
   data.background = (1.0, 1.0, 1.0)  # White, as the captures are composited.
   data.progress = True  # Progress bars of the captures.
@@ -93,7 +93,8 @@ def default_config():
   data.downscale = 5  # Integer image downscale (lego's 400 x 400 files: 80 x 80).
   data.test_every = 4  # Every n-th test view (50 of lego's 200).
   data.bounds = (-1.3, 1.3)  # Cube of the random initial points (NeRF Synthetic's).
-  # kind "colmap": a COLMAP capture at `path` (images_{downscale}/ when downscale > 1);
+  # kind "colmap", "llff", "nerfstudio": a capture at `path` (images_{downscale}/ when
+  # downscale > 1);
   # every holdout_every-th image by name is a test view, the others the candidates. Round
   # models start from its sparse points with round_train.model.init_from = "points".
   data.holdout_every = 8

@@ -8,9 +8,10 @@
 * "synthetic": random ground-truth Gaussians rendered by `mfsample.render` (tests and the
   notebook): every pose has a ground truth, no files and no Mitsuba needed.
 * every dataset kind that is files on disk (`mfsample.data.FILE_KINDS`: NeRF Synthetic
-  "blender", "colmap", "llff"): candidates = its training views, test = its test views,
-  loaded by `mfsample.data.load_dataset`. No oracle: only the selection strategies run. A
-  COLMAP capture brings its sparse points, for round models that start from them.
+  "blender", "colmap", "llff", "nerfstudio"): candidates = its training views, test = its
+  test views, loaded by `mfsample.data.load_dataset`. No oracle: only the selection
+  strategies run. A COLMAP or nerfstudio capture brings its sparse points, for round models
+  that start from them.
 """
 
 import math

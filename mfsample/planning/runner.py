@@ -351,7 +351,9 @@ def run_record(strategy, seed, selected, metrics, seconds, pool):
       "strategy": strategy.name, "label": strategy.label, "seed": int(seed),
       "indices": [None if s.index is None else int(s.index) for s in selected],
       "world_to_camera": [np.asarray(s.camera.world_to_camera).tolist() for s in selected],
-      "uv": uv.tolist(), "scores": [float(s.score) for s in selected],
+      # The initial view has no score (nan): null in the record, as it reads back.
+      "uv": uv.tolist(), "scores": [float(s.score) if np.isfinite(s.score) else None
+                                    for s in selected],
       "round_seconds": [float(s.seconds) for s in selected],
       "optimisation": [s.info for s in selected],
       "metrics": {str(n): m for n, m in metrics.items()}, "seconds": float(seconds),

@@ -22,6 +22,7 @@ from mfsample import interrupts
 from mfsample import uncertainty as unc
 from mfsample.camera import Camera
 from mfsample.mean_render import render_mean_views
+from mfsample.metrics import spearman
 from mfsample.planning import poses
 from mfsample.renderer import RenderSettings
 from mfsample.renderer.budget import Budgets, render_with_budget
@@ -35,7 +36,8 @@ class UError(NamedTuple):
     error: [B] mean squared error of the mean render there, or None without images.
     angle: [B] angle (radians) to the nearest training view, seen from `center`, or None
       without training cameras.
-    rho_u_error: Spearman's rho of u against error (None without images).
+    rho_u_error: Spearman's rho of u against error (None without images, or undefined:
+      fewer than 3 candidates, or a constant side).
     rho_u_angle: Spearman's rho of u against angle (None without training cameras).
     rho_error_angle: Spearman's rho of error against angle (None without either).
     budgets: the `Budgets` that sufficed (`score`: U; `mean`: the mean renders).
@@ -51,11 +53,8 @@ class UError(NamedTuple):
 
 
 def _rho(a, b):
-  from scipy.stats import spearmanr
-
-  if a is None or b is None:
-    return None
-  return float(spearmanr(a, b).correlation)
+  """Spearman's rho (`metrics.spearman`), None where undefined or without one of them."""
+  return None if a is None or b is None else spearman(a, b)
 
 
 def u_against_error(model, cameras: Camera, z, *, background, images=None, train_cameras=None,

@@ -131,9 +131,10 @@ def summarise(cases, c, seeds, counts, samples):
   for steps, sampler in itertools.product((int(s) for s in c.steps), c.samplers):
     records = [cases[(steps, sampler, seed, n)] for seed in seeds for n in counts]
     for m in samples:
+      # An undefined rho (constant U or error) is null in the records: NaN here.
       values = np.asarray([[r["by_samples"][str(m)][k] for k in
                             ("rho_u_error", "rho_u_angle", "rho_error_angle")]
-                           for r in records])
+                           for r in records], dtype=float)
       rows.append({"round_steps": steps, "sampler": sampler, "samples": m,
                    "rho_u_error": float(values[:, 0].mean()),
                    "rho_u_angle": float(values[:, 1].mean()),
@@ -150,13 +151,13 @@ def paired_differences(rows, field):
   equal: mean, standard error and the number of cases above."""
   others = [f for f in SETTINGS if f != field]
   first = rows[0][field]
-  base = {tuple(r[f] for f in others): np.asarray(r["per_case_rho_u_error"])
+  base = {tuple(r[f] for f in others): np.asarray(r["per_case_rho_u_error"], dtype=float)
           for r in rows if r[field] == first}
   paired = []
   for r in rows:
     if r[field] == first:
       continue
-    diff = np.asarray(r["per_case_rho_u_error"]) - base[tuple(r[f] for f in others)]
+    diff = np.asarray(r["per_case_rho_u_error"], dtype=float) - base[tuple(r[f] for f in others)]
     paired.append({**{f: r[f] for f in SETTINGS}, "minus": {field: first},
                    "mean": float(diff.mean()),
                    "sem": float(diff.std(ddof=1) / np.sqrt(len(diff))) if len(diff) > 1

@@ -24,15 +24,18 @@ def default_config():
   # ----------------------------------------------------------------- data
   config.data = data = ml_collections.ConfigDict()  # Which views to train and test on.
   # "synthetic" (random Gaussians), "blender" (NeRF Synthetic), "scene" (Mitsuba), "colmap"
-  # (a COLMAP capture: mfsample.data.load_colmap) or "llff" (mfsample.data.load_llff).
+  # (a COLMAP capture: mfsample.data.load_colmap), "llff" (mfsample.data.load_llff) or
+  # "nerfstudio" (ns-process-data's transforms.json: mfsample.data.load_nerfstudio); the
+  # kinds are mfsample.data.DATA_KINDS.
   data.kind = "scene"
-  data.path = "data/nerf_synthetic/lego"  # blender, colmap, llff: scene folder (relative: cwd).
-  # blender: integer image downscale factor (lego files are 400x400); colmap, llff: read the
-  # pre-downscaled images_{downscale}/ folder (1: images/).
+  # blender, colmap, llff, nerfstudio: scene folder (relative: cwd).
+  data.path = "data/nerf_synthetic/lego"
+  # blender: integer image downscale factor (lego files are 400x400); colmap, llff,
+  # nerfstudio: read the pre-downscaled images_{downscale}/ folder (1: images/).
   data.downscale = 1
   data.test_every = 1  # blender: evaluate every n-th test view (1: all 200).
-  # colmap, llff: every n-th image (by name, from the first) is a test view, the others train
-  # (the Mip-NeRF 360 / 3DGS split: 8).
+  # colmap, llff, nerfstudio: every n-th image (by name, from the first) is a test view, the
+  # others train (the Mip-NeRF 360 / 3DGS split: 8).
   data.holdout_every = 8
   data.scene = "default"  # scene: name for mfsample.scenes.get_scene.
   data.width = 128  # scene: image width in pixels.
@@ -64,8 +67,9 @@ def default_config():
   model.init_points = 5_000
   model.init_opacity = 0.1  # Initial opacity of every Gaussian.
   # Where the Gaussians start (mfsample.train.initial): "random" (init_points in the scene
-  # box), "points" (the dataset's SfM points and colours: data.kind "colmap") or "ply" (the
-  # Gaussians of a trained 3DGS model, model.ply_path; model.sh_degree must match it).
+  # box), "points" (the dataset's SfM points and colours: data.kind "colmap" or "nerfstudio")
+  # or "ply" (the Gaussians of a trained 3DGS model, model.ply_path; model.sh_degree must
+  # match it).
   model.init_from = "random"
   model.ply_path = ""  # init_from "ply": a 3DGS point_cloud.ply (relative: to the cwd).
   model.max_gaussians = 40_000  # Densification never exceeds this many live Gaussians.

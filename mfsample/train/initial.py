@@ -3,7 +3,7 @@
 * "random": `model.init_points` points uniform in the scene box (3DGS's start without SfM,
   NeRF Synthetic's usual one), near-grey colours;
 * "points": the dataset's sparse SfM points with their colours (3DGS's start on real
-  captures; `data.kind = "colmap"`);
+  captures; `data.kind = "colmap"` or "nerfstudio");
 * "ply": the Gaussians of a trained 3DGS model (`model.ply_path`), kept exactly as stored.
   With the mean frozen this is post-hoc uncertainty (`mfsample.train.posthoc`); trained
   jointly, it fine-tunes the model as a stochastic field.
@@ -42,7 +42,7 @@ def initial_model(config, setup, bounds, points, key):
   if init_from == "points":
     if points is None or len(points) == 0:
       raise ValueError("config.model.init_from = 'points' needs a dataset with a sparse point "
-                       f"cloud (data.kind = 'colmap'), got data.kind = "
+                       f"cloud (data.kind = 'colmap' or 'nerfstudio'), got data.kind = "
                        f"{config.data.get('kind')!r}" + (" with no points" if points is not None
                                                          else ""))
     return init_model(key, np.asarray(points.xyz, np.float64), sh_degree=sh_degree,

@@ -1,0 +1,380 @@
+"""nerfstudio captures: the `transforms.json` layout of `ns-process-data`, read and written.
+
+The layout (`ns-process-data images --data photos/ --output-dir scene/`):
+
+  scene/
+    transforms.json    cameras and frames (below)
+    images/            the photographs (frame_00001.png ...)
+    images_2/ ...      optional downscaled copies with the same file names
+    sparse_pc.ply      the SfM points (`ply_file_path`), in the frames' world
+    colmap/            COLMAP's own model (read it with `load_colmap` if you prefer)
+
+`transforms.json` holds the intrinsics `fl_x, fl_y, cx, cy, w, h` (pixels), `camera_model`
+and distortion `k1 k2 k3 k4 p1 p2` at the top level when every frame shares them, or in each
+frame otherwise; a list of `frames`, each with `file_path` and `transform_matrix`; optionally
+`applied_transform` and `ply_file_path`. Conventions, as nerfstudio's own dataparser reads
+them (`nerfstudio/data/dataparsers/nerfstudio_dataparser.py`):
+
+* `transform_matrix` is camera-to-world with OpenGL camera axes (x right, y up, z backward):
+  `Camera.world_to_camera` = inverse(transform_matrix @ diag(1, -1, -1, 1)).
+* Pixel centres sit at +0.5 in nerfstudio as in COLMAP and mfsample, so `fl_x, fl_y, cx, cy`
+  carry over unchanged.
+* A key at the top level applies to every frame; a frame carries its own value only where the
+  top level has none. A frame whose value contradicts the top level's is refused (nerfstudio
+  would silently use the top level's).
+* `applied_transform` (3 x 4) is what `ns-process-data` applied to the reconstruction it read:
+  it maps the original world (COLMAP's) to the world of `transform_matrix` and of the points
+  in `ply_file_path` (ns-process-data transforms them too). `frame="transforms"` (default)
+  returns cameras and points in the world of the file; `frame="original"` undoes
+  `applied_transform`, giving the coordinates of the reconstruction it came from: the cameras
+  of `load_colmap(scene/colmap)` and of a 3DGS model trained on that COLMAP model.
+* Frames are ordered by file path (as nerfstudio orders them) and named by the file's path
+  under `images/` without its extension. `images_{N}/` holds the same file names; the
+  intrinsics are scaled to the size of the images found there (as `load_colmap` does).
+* Only pinhole cameras render correctly with a pinhole renderer: `PINHOLE`,
+  `SIMPLE_PINHOLE`, and `OPENCV`, `SIMPLE_RADIAL`, `RADIAL`, `FULL_OPENCV` (or no
+  `camera_model`, nerfstudio's perspective default) whose distortion is all zero. Anything
+  else (a fisheye, an equirectangular camera, non-zero distortion) is refused naming the model
+  and the frame: process the capture with `ns-process-data ... --camera-type pinhole`, which
+  has COLMAP solve for distortion-free cameras.
+* nerfstudio's trainers then re-centre, orient and scale the cameras for their own use
+  (`dataparser_transforms.json` in their output folder); that is not part of the capture, and a
+  model exported by `ns-export gaussian-splat` lives in that frame, not in this one.
+
+`export_nerfstudio` writes `Views` (and points) in this layout, for nerfstudio and for tests.
+"""
+
+from pathlib import Path
+
+import numpy as np
+
+from mfsample.camera import Camera
+from mfsample.data import _io
+from mfsample.data.colmap import PointCloud
+from mfsample.data.views import Views
+
+GL_TO_CV = np.diag([1.0, -1.0, -1.0, 1.0])  # OpenGL camera axes <-> OpenCV (its own inverse)
+
+# The per-camera keys of transforms.json (top level or per frame).
+_INTRINSICS = ("fl_x", "fl_y", "cx", "cy")
+_SIZE = ("w", "h")
+_DISTORTION = ("k1", "k2", "k3", "k4", "k5", "k6", "p1", "p2")
+# Perspective models: read when their distortion is zero. Missing camera_model: perspective.
+_PERSPECTIVE = ("PINHOLE", "SIMPLE_PINHOLE", "OPENCV", "SIMPLE_RADIAL", "RADIAL", "FULL_OPENCV")
+_HINT = ("process the capture with `ns-process-data images ... --camera-type pinhole` (COLMAP "
+         "then solves distortion-free cameras), or undistort the images and write PINHOLE "
+         "intrinsics")
+
+# ns-process-data's applied_transform (COLMAP's world -> nerfstudio's: y and z swapped, the new
+# z negated): what `export_nerfstudio(..., applied_transform=NS_PROCESS_DATA_TRANSFORM)` records.
+NS_PROCESS_DATA_TRANSFORM = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0],
+                                      [0.0, -1.0, 0.0, 0.0]])
+
+
+def load_nerfstudio(path, *, factor=1, frame="transforms", background=(1.0, 1.0, 1.0)):
+  """Loads a nerfstudio capture: posed images and the SfM points.
+
+  Args:
+    path: the scene folder holding `transforms.json`, or the json file itself.
+    factor: read the downscaled `images_{factor}/` copies (1: the frames' own files).
+    frame: "transforms" (the world of transform_matrix) or "original" (`applied_transform`
+      undone; the module docstring says which is which).
+    background: [3] colour that images with an alpha channel are composited on.
+
+  Returns:
+    (views, points): `Views` (images [V, H, W, 3] float32 in [0, 1], alphas when the images
+    have them, cameras in OpenCV axes, names) ordered by file path, and the `PointCloud` of
+    `ply_file_path` (empty when the capture names none).
+
+  Raises:
+    FileNotFoundError: a missing folder, json, image or point file (named in the message).
+    DatasetError (a ValueError): malformed json, a missing or contradictory key (named with
+      its frame), a distorted or non-perspective camera, a non-rigid pose, images of different
+      sizes or not a scaled copy of their frame's `w` x `h`.
+  """
+  path = Path(path)
+  json_path = path if path.suffix == ".json" else path / "transforms.json"
+  if not path.exists():
+    raise FileNotFoundError(f"nerfstudio capture not found: {path}")
+  root = json_path.parent
+  if isinstance(factor, bool) or not isinstance(factor, (int, np.integer)) or factor < 1:
+    raise ValueError(f"factor must be an integer >= 1, got {factor!r}")
+  if frame not in ("transforms", "original"):
+    raise ValueError(f"frame must be 'transforms' or 'original', got {frame!r}")
+  bg = np.asarray(background, np.float64)
+  if bg.shape != (3,) or not np.all(np.isfinite(bg)):
+    raise ValueError(f"background must be 3 finite numbers, got {background!r}")
+  meta = _io.read_json(json_path)
+  if not isinstance(meta, dict) or not isinstance(meta.get("frames"), list):
+    raise _io.DatasetError(f"{json_path}: expected an object with a 'frames' list.")
+  if not meta["frames"]:
+    raise _io.DatasetError(f"{json_path}: 'frames' is empty.")
+  applied = applied_transform(meta, json_path)
+  to_original = np.linalg.inv(applied) if frame == "original" else np.eye(4)
+
+  frames = []
+  for i, entry in enumerate(meta["frames"]):
+    if not isinstance(entry, dict) or not isinstance(entry.get("file_path"), str):
+      raise _io.DatasetError(f"{json_path}: frames[{i}] needs a 'file_path' string.")
+    frames.append(entry)
+  frames.sort(key=lambda f: str(Path(f["file_path"])))
+  images, alphas, w2cs, ks, names = [], [], [], [], []
+  size = None
+  for entry in frames:
+    where = f"{json_path}: frame {entry['file_path']!r}"
+    (fx, fy, cx, cy), (cam_w, cam_h) = _pinhole(meta, entry, where)
+    file = _frame_image(root, entry["file_path"], factor)
+    color, alpha = _io.read_image(file)
+    size = color.shape[:2] if size is None else size
+    sx, sy = _io.image_scale(file, color.shape[:2], size, (cam_w, cam_h), "the first frame's",
+                             where)
+    if "transform_matrix" not in entry:
+      raise _io.DatasetError(f"{where} has no 'transform_matrix'.")
+    c2w = _io.validate_rigid(entry["transform_matrix"], where, "'transform_matrix'")
+    # The true inverse (not a transpose): a float32 pose written by export_nerfstudio reads
+    # back bit for bit.
+    w2cs.append(np.linalg.inv(to_original @ c2w @ GL_TO_CV))
+    if alpha is not None:
+      color = color * alpha[..., None] + (1.0 - alpha[..., None]) * bg
+    images.append(color)
+    alphas.append(alpha)
+    ks.append((fx * sx, fy * sy, cx * sx, cy * sy))
+    names.append(_frame_name(entry["file_path"]))
+
+  alpha_arr = None
+  if any(a is not None for a in alphas):
+    alpha_arr = np.stack([np.ones(size, np.float32) if a is None else a for a in alphas])
+  ks = np.asarray(ks, np.float64).astype(np.float32)
+  cameras = Camera.create(np.stack(w2cs).astype(np.float32), ks[:, 0], ks[:, 1], ks[:, 2],
+                          ks[:, 3], size[1], size[0])
+  views = Views(images=np.clip(np.stack(images), 0.0, 1.0).astype(np.float32), cameras=cameras,
+                alphas=alpha_arr, names=tuple(names))
+  points = PointCloud(np.zeros((0, 3), np.float32), np.zeros((0, 3), np.float32))
+  if meta.get("ply_file_path"):
+    points = read_points(root / str(meta["ply_file_path"]))
+    if frame == "original":
+      xyz = np.asarray(points.xyz, np.float64) @ to_original[:3, :3].T + to_original[:3, 3]
+      points = PointCloud(xyz.astype(np.float32), points.rgb)
+  return views, points
+
+
+def applied_transform(meta, where="transforms.json"):
+  """[4, 4] float64 `applied_transform` of a transforms.json dict (identity without one)."""
+  if "applied_transform" not in meta:
+    return np.eye(4)
+  return _io.validate_rigid(meta["applied_transform"], where, "'applied_transform'")
+
+
+def _value(meta, entry, key, where, default=None):
+  """A per-camera key: the top level's, else the frame's; refused when they disagree."""
+  top, own = meta.get(key), entry.get(key)
+  if top is not None and own is not None and top != own:
+    raise _io.DatasetError(f"{where} has {key} = {own!r} but the top level says {top!r}; "
+                           "nerfstudio uses the top level's: keep one of them.")
+  if top is None and own is None:
+    if default is not None:
+      return default
+    raise _io.DatasetError(f"{where}: '{key}' is neither in the frame nor at the top level.")
+  return _io.number(meta if top is not None else entry, key, where,
+                    integer=key in _SIZE)
+
+
+def _pinhole(meta, entry, where):
+  """((fx, fy, cx, cy), (w, h)) of a frame's camera; DatasetError for a distorted one."""
+  model = meta.get("camera_model", "OPENCV")
+  if model not in _PERSPECTIVE:
+    raise _io.DatasetError(f"{where} has the camera model {model!r}, which the pinhole "
+                           f"renderer cannot reproduce; {_HINT}.")
+  distortion = {k: _value(meta, entry, k, where, default=0.0) for k in _DISTORTION}
+  listed = meta.get("distortion_params", entry.get("distortion_params"))
+  if listed is not None and any(v != 0 for v in np.ravel(np.asarray(listed, np.float64))):
+    distortion["distortion_params"] = listed
+  bad = {k: v for k, v in distortion.items() if np.any(np.asarray(v) != 0)}
+  if bad:
+    raise _io.DatasetError(f"{where} has the camera model {model!r} with distortion {bad}; "
+                           f"{_HINT}.")
+  fx, fy, cx, cy = (_value(meta, entry, k, where) for k in _INTRINSICS)
+  w, h = (_value(meta, entry, k, where) for k in _SIZE)
+  if fx <= 0 or fy <= 0 or w < 1 or h < 1:
+    raise _io.DatasetError(f"{where}: invalid intrinsics fl_x={fx}, fl_y={fy}, w={w}, h={h}.")
+  return (fx, fy, cx, cy), (w, h)
+
+
+def _frame_image(root, file_path, factor):
+  """The image file of a frame: `file_path` under the capture, or for factor N the same file
+  name in `images_N/` (nerfstudio's rule), with another image extension if need be."""
+  file = root / file_path
+  if factor > 1:
+    folder = root / f"images_{int(factor)}"
+    if not folder.is_dir():
+      found = sorted(p.name for p in root.glob("images*") if p.is_dir())
+      raise FileNotFoundError(f"image folder for factor={factor} not found: {folder} (image "
+                              f"folders in {root}: {', '.join(found) or 'none'}).")
+    file = folder / Path(file_path).name
+  if file.is_file():
+    return file
+  # Downscaled copies are often written as PNG whatever the originals are.
+  for candidate in sorted(file.parent.glob(file.stem + ".*")) if file.parent.is_dir() else []:
+    if candidate.suffix.lower() in _io.IMAGE_SUFFIXES:
+      return candidate
+  raise FileNotFoundError(f"image of frame {file_path!r} not found: {file} (nor {file.stem} "
+                          "with another image extension).")
+
+
+def _frame_name(file_path):
+  """The view name of a frame: its path under images/ (or as given) without the extension."""
+  parts = Path(file_path).with_suffix("").parts
+  parts = [p for p in parts if p not in (".", "")]
+  if len(parts) > 1 and parts[0] == "images":
+    parts = parts[1:]
+  return "/".join(parts)
+
+
+def read_points(path):
+  """The `PointCloud` of a point-cloud .ply (ASCII, as ns-process-data writes it, or binary):
+  float x, y, z and optional red, green, blue (8-bit, or floats in [0, 1]; grey without)."""
+  from mfsample.data.ply import _plyfile
+
+  plyfile = _plyfile()
+  path = _io.require_file(path, "point cloud (ply_file_path)")
+  try:
+    data = plyfile.PlyData.read(str(path))
+  except Exception as e:  # plyfile raises its own types for malformed files
+    raise _io.DatasetError(f"{path}: cannot be read as a PLY file ({e}).") from e
+  if "vertex" not in [e.name for e in data.elements]:
+    raise _io.DatasetError(f"{path}: no 'vertex' element.")
+  vertex = data["vertex"].data
+  names = vertex.dtype.names or ()
+  missing = [c for c in "xyz" if c not in names]
+  if missing:
+    raise _io.DatasetError(f"{path}: missing vertex propert{'ies' if len(missing) > 1 else 'y'} "
+                           f"{', '.join(missing)}.")
+  xyz = np.stack([np.asarray(vertex[c], np.float64) for c in "xyz"], axis=-1)
+  if not np.all(np.isfinite(xyz)):
+    raise _io.DatasetError(f"{path}: non-finite point coordinates.")
+  if all(c in names for c in ("red", "green", "blue")):
+    rgb = np.stack([np.asarray(vertex[c], np.float64) for c in ("red", "green", "blue")], -1)
+    if np.issubdtype(vertex["red"].dtype, np.integer):
+      rgb = rgb / 255.0
+  else:
+    rgb = np.full_like(xyz, 0.5)
+  return PointCloud(xyz.astype(np.float32), np.clip(rgb, 0.0, 1.0).astype(np.float32))
+
+
+# ------------------------------------------------------------------------- writing
+
+
+def frames_of(cameras: Camera, names, *, applied=None, image_dir="images", image_suffix=".png",
+              per_frame_intrinsics=None):
+  """(top-level intrinsics dict, frames list) of transforms.json for a batch of cameras.
+
+  Args:
+    cameras: `Camera` batched over [V].
+    names: V file stems (without folder and extension).
+    applied: optional [3, 4] or [4, 4] `applied_transform` to write the poses through.
+    image_dir, image_suffix: where the frames' `file_path` points.
+    per_frame_intrinsics: write intrinsics in every frame (default: only when they differ).
+  """
+  w2c = np.asarray(cameras.world_to_camera, np.float64).reshape(-1, 4, 4)
+  applied = np.eye(4) if applied is None else _as_4x4(applied)
+  ks = np.stack([np.asarray(getattr(cameras, k), np.float32).reshape(-1).astype(np.float64)
+                 for k in ("fx", "fy", "cx", "cy")], axis=-1)
+  if per_frame_intrinsics is None:
+    per_frame_intrinsics = bool(np.any(ks != ks[:1]))
+  size = {"w": int(cameras.width), "h": int(cameras.height)}
+  top = {"camera_model": "PINHOLE"}
+  if not per_frame_intrinsics:
+    top.update(dict(zip(_INTRINSICS, ks[0].tolist(), strict=True)), **size)
+  frames = []
+  for i in range(len(w2c)):
+    c2w = applied @ np.linalg.inv(w2c[i]) @ GL_TO_CV
+    frame = {"file_path": f"{image_dir}/{names[i]}{image_suffix}",
+             "transform_matrix": c2w.tolist()}
+    if per_frame_intrinsics:
+      frame.update(dict(zip(_INTRINSICS, ks[i].tolist(), strict=True)), **size)
+    frames.append(frame)
+  return top, frames
+
+
+def _as_4x4(matrix):
+  m = np.asarray(matrix, np.float64)
+  return np.concatenate([m, [[0.0, 0.0, 0.0, 1.0]]]) if m.shape == (3, 4) else m
+
+
+def export_nerfstudio(path, views: Views, points: PointCloud | None = None, *,
+                      applied_transform=None, downscales=(), overwrite=False):
+  """Writes `views` (and `points`) as a nerfstudio capture that `load_nerfstudio` and
+  nerfstudio's dataparser read.
+
+  Writes `path/images/{index:05d}_{name}.png` (8-bit RGB; the index keeps the view order),
+  `images_{N}/` copies box-filtered by each factor N of `downscales` (the image size must be
+  divisible by N), `sparse_pc.ply` (binary float32 x, y, z and 8-bit colours) when `points`
+  are given, and `transforms.json` last: PINHOLE intrinsics at the top level when the views
+  share them (per frame otherwise) and camera-to-world `transform_matrix` in OpenGL axes.
+
+  Args:
+    path: output folder (created if needed).
+    views: the views to write.
+    points: optional `PointCloud`.
+    applied_transform: optional [3, 4] rigid transform from the views' world to the written
+      one, recorded as `applied_transform` (e.g. `NS_PROCESS_DATA_TRANSFORM`, what
+      ns-process-data applies to a COLMAP model); the points are transformed too.
+    downscales: integer factors of the `images_N/` copies to write.
+    overwrite: replace an existing transforms.json (otherwise FileExistsError).
+
+  Returns:
+    the path of transforms.json. `load_nerfstudio(path)` returns the views' cameras (and
+    `frame="original"` the untransformed ones), the images quantised to 8 bits, the points.
+  """
+  import imageio.v3 as iio
+
+  from mfsample._json import atomic_path, write_json
+  from mfsample.data.ply import _plyfile
+
+  root = Path(path)
+  json_path = root / "transforms.json"
+  if json_path.exists() and not overwrite:
+    raise FileExistsError(f"{json_path} exists; pass overwrite=True to replace it.")
+  images = np.asarray(views.images, np.float32)
+  cameras = views.cameras
+  if images.ndim != 4 or images.shape[-1] != 3 or cameras.batch_shape != (len(images),):
+    raise ValueError(f"views must hold [V, H, W, 3] images and V cameras, got images "
+                     f"{images.shape} and cameras {cameras.batch_shape}")
+  applied = None
+  if applied_transform is not None:
+    applied = _io.validate_rigid(applied_transform, "applied_transform", "applied_transform")
+  stems = []
+  for i in range(len(images)):
+    stem = f"{i:05d}"
+    if views.names:
+      stem += "_" + "".join(c if c.isalnum() or c in "-_." else "_" for c in str(views.names[i]))
+    stems.append(stem)
+  for factor in (1, *(int(f) for f in downscales)):
+    folder = root / ("images" if factor == 1 else f"images_{factor}")
+    folder.mkdir(parents=True, exist_ok=True)
+    for stem, image in zip(stems, images, strict=True):
+      small = _io.area_downscale(np.clip(image, 0.0, 1.0), factor)
+      with atomic_path(folder / f"{stem}.png") as tmp:
+        iio.imwrite(tmp, np.round(small * 255.0).astype(np.uint8))
+  top, frames = frames_of(cameras, stems, applied=applied)
+  meta = dict(top)
+  if applied is not None:
+    meta["applied_transform"] = applied[:3].tolist()
+  if points is not None:
+    xyz = np.asarray(points.xyz, np.float64)
+    if applied is not None:
+      xyz = xyz @ applied[:3, :3].T + applied[:3, 3]
+    table = np.empty(len(xyz), dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4"),
+                                      ("red", "u1"), ("green", "u1"), ("blue", "u1")])
+    for j, c in enumerate("xyz"):
+      table[c] = xyz[:, j]
+    rgb = np.round(np.clip(np.asarray(points.rgb, np.float64), 0.0, 1.0) * 255.0)
+    for j, c in enumerate(("red", "green", "blue")):
+      table[c] = rgb[:, j]
+    plyfile = _plyfile()
+    with atomic_path(root / "sparse_pc.ply") as tmp:
+      plyfile.PlyData([plyfile.PlyElement.describe(table, "vertex")]).write(tmp)
+    meta["ply_file_path"] = "sparse_pc.ply"
+  meta["frames"] = frames
+  write_json(json_path, meta)  # last: a complete capture has its json
+  return json_path

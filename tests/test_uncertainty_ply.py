@@ -1,0 +1,86 @@
+"""Uncertainty in .ply files: the standard layout with extra properties, geometry untouched,
+and a render of the coloured file that lights up where an unseen view's U map does."""
+
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from planning_testlib import tiny_pool, trained_one_view
+
+from mfsample import render
+from mfsample import uncertainty as unc
+from mfsample.data.ply import load_ply, read_vertex_table
+from mfsample.gaussian_uncertainty import gaussian_uncertainty
+from mfsample.metrics import spearman
+from mfsample.model import activate
+from mfsample.next_views.uncertainty_ply import write_uncertainty_plys
+
+
+@pytest.fixture(scope="module")
+def written(tmp_path_factory):
+  """A field trained on one view of the tiny pool; shares over the other candidates but the
+  one farthest from the training view (the unseen target), written as .ply files."""
+  trained = trained_one_view()
+  pool = tiny_pool()
+  model = trained.model
+  centers = np.asarray(pool.candidates.cameras.center)
+  target = int(np.argmax(np.linalg.norm(centers - centers[0], axis=1)))
+  others = [i for i in range(1, len(centers)) if i != target]
+  z = unc.uncertainty_z(model, 8)
+  bg = jnp.asarray(pool.background, jnp.float32)
+  per = gaussian_uncertainty(model, pool.candidates.cameras[np.asarray(others)], z,
+                             settings=trained.settings, background=bg)
+  directory = tmp_path_factory.mktemp("uply")
+  coloured, own = write_uncertainty_plys(directory, model, per)
+  return model, per, coloured, own, pool.candidates.cameras[target], z, trained.settings, bg
+
+
+@pytest.mark.slow
+def test_files_keep_the_geometry_and_carry_the_uncertainty(written):
+  model, per, coloured, own, *_ = written
+  live = np.asarray(model.mask)
+  for path in (coloured, own):
+    table = read_vertex_table(path)
+    names = table.dtype.names
+    assert names[:6] == ("x", "y", "z", "nx", "ny", "nz") and names[-3:] == (
+        "u_share", "position_std", "colour_std")
+    np.testing.assert_array_equal(table["u_share"], per.share[live])
+    np.testing.assert_array_equal(table["position_std"], per.position_std[live])
+    np.testing.assert_array_equal(table["colour_std"], per.colour_std[live])
+    raw = load_ply(path)  # extra properties are skipped by the reader
+    for group in ("means", "log_scales", "quats", "opacity_logits"):
+      np.testing.assert_array_equal(raw[group], np.asarray(model.params.mean[group])[live])
+  np.testing.assert_array_equal(load_ply(own)["sh_dc"], np.asarray(
+      model.params.mean["sh_dc"])[live])
+
+
+@pytest.mark.slow
+def test_the_coloured_file_lights_up_where_an_unseen_view_is_uncertain(written):
+  """Rendered from a view none of the shares came from, the brightest Gaussians of the
+  coloured file sit where that view's U map is high."""
+  model, per, coloured, _, camera, z, settings, bg = written
+  raw = load_ply(coloured)
+  gaussians = activate({g: jnp.asarray(v) for g, v in raw.items()}, None,
+                       jnp.asarray(3, jnp.int32))
+  out = render(gaussians, camera, settings=settings, background=jnp.zeros(3))
+  assert not np.any(out.stats.overflow)
+  brightness = np.asarray(out.rgb).sum(-1)
+  u_map = np.asarray(unc.uncertainty(model, camera, z, settings=settings,
+                                     background=bg).pixel_map)
+  covered = np.asarray(out.alpha) > 0.5
+  rho = spearman(brightness[covered], u_map[covered])
+  assert rho is not None and rho > 0.4, rho
+  # The top tenth of the Gaussians by share land on pixels of high U in the unseen view.
+  live = np.asarray(model.mask)
+  share = per.share[live]
+  uv, depth = camera.project(jnp.asarray(raw["means"]))
+  uv, depth = np.asarray(uv), np.asarray(depth)
+  col, row = np.floor(uv[:, 0]).astype(int), np.floor(uv[:, 1]).astype(int)
+  inside = (depth > 0) & (col >= 0) & (col < camera.width) & (row >= 0) & (row < camera.height)
+  top = inside & (share >= np.quantile(share, 0.9))
+  bottom = inside & (share <= np.quantile(share, 0.5))
+  assert top.sum() >= 3 and bottom.sum() >= 3
+  at = lambda m: u_map[row[m], col[m]]
+  assert np.median(at(top)) > 2.0 * np.median(at(bottom)), (np.median(at(top)),
+                                                            np.median(at(bottom)))
+
