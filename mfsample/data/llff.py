@@ -50,8 +50,12 @@ def load_llff(path, *, factor=8):
   poses_path = _io.require_file(root / "poses_bounds.npy", "LLFF poses file")
   try:
     data = np.load(poses_path, allow_pickle=False)
-  except (ValueError, OSError) as e:
+  except (ValueError, OSError, EOFError) as e:
     raise _io.DatasetError(f"{poses_path}: cannot read ({e}).") from e
+  if not isinstance(data, np.ndarray):  # np.load opens an .npz archive under any name
+    data.close()
+    raise _io.DatasetError(f"{poses_path}: an .npz archive, not a .npy array; LLFF stores one "
+                           "[V, 17] array (np.save).")
   if not (np.issubdtype(data.dtype, np.floating) or np.issubdtype(data.dtype, np.integer)):
     raise _io.DatasetError(f"{poses_path}: expected a real number array, got dtype "
                            f"{data.dtype}.")
@@ -76,6 +80,7 @@ def load_llff(path, *, factor=8):
   if len(files) != len(mats):
     raise _io.DatasetError(f"{image_dir}: {len(files)} images but {poses_path} has "
                            f"{len(mats)} poses.")
+  _io.unique_names([f.stem for f in files], image_dir, "file stem")
   images = []
   for file in files:
     color, _ = _io.read_image(file)
@@ -94,8 +99,9 @@ def load_llff(path, *, factor=8):
     h, w, f = mat[:, 4]
     if h <= 0 or w <= 0 or f <= 0:
       raise _io.DatasetError(f"{where}: invalid (h, w, focal) = ({h}, {w}, {f}).")
+    # Per-axis scale: folders made by LLFF's minify round the image size.
+    _io.check_scaled_copy((height, width), (h, w), files[v], where)
   hwf = mats[:, :, 4]
-  # Per-axis scale: folders made by LLFF's minify round the image size.
   sx, sy = width / hwf[:, 1], height / hwf[:, 0]
   w2c = _io.invert_rigid(c2w).astype(np.float32)
   cameras = Camera.create(w2c, (hwf[:, 2] * sx).astype(np.float32),
