@@ -45,10 +45,8 @@ def check_float(name, value, *, minimum=None, maximum=None, above=None, below=No
   ok = ok and (minimum is None or number >= minimum) and (maximum is None or number <= maximum)
   ok = ok and (above is None or number > above) and (below is None or number < below)
   if not ok:
-    bounds = "".join(t for t in (_range(minimum, maximum),
-                                 f" > {above}" if above is not None else "",
-                                 f" < {below}" if below is not None else ""))
-    raise ValueError(f"{name} must be a finite number{bounds}, got {value!r}")
+    raise ValueError(f"{name} must be a finite number{_interval(minimum, maximum, above, below)}"
+                     f", got {value!r}")
   return number
 
 
@@ -151,6 +149,21 @@ def _range(minimum, maximum):
     return f" >= {minimum}"
   if maximum is not None:
     return f" <= {maximum}"
+  return ""
+
+
+def _interval(minimum, maximum, above, below):
+  """" in [a, b)", " > a", ... : the allowed values in words."""
+  low = (f"[{minimum}", minimum) if minimum is not None else (f"({above}", above) \
+      if above is not None else None
+  high = (f"{maximum}]", maximum) if maximum is not None else (f"{below})", below) \
+      if below is not None else None
+  if low and high:
+    return f" in {low[0]}, {high[0]}"
+  if low:
+    return f" {'>=' if minimum is not None else '>'} {low[1]}"
+  if high:
+    return f" {'<=' if maximum is not None else '<'} {high[1]}"
   return ""
 
 

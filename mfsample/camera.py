@@ -158,6 +158,9 @@ class Camera:
       width, height: image size in pixels.
     """
     c2w = jnp.asarray(c2w, dtype=jnp.result_type(float, c2w))
+    if c2w.ndim < 2 or tuple(c2w.shape[-2:]) not in ((3, 4), (4, 4)):
+      raise ValueError(f"Camera.from_blender: c2w must have shape [..., 4, 4] or [..., 3, 4], "
+                       f"got {list(c2w.shape)}")
     if c2w.shape[-2] == 3:
       bottom = jnp.broadcast_to(jnp.array([0.0, 0.0, 0.0, 1.0], c2w.dtype),
                                 c2w.shape[:-2] + (1, 4))

