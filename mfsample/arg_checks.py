@@ -30,7 +30,8 @@ def check_int(name, value, *, minimum=None, maximum=None):
   ok = isinstance(value, Integral) and not isinstance(value, bool)
   ok = ok and (minimum is None or value >= minimum) and (maximum is None or value <= maximum)
   if not ok:
-    raise ValueError(f"{name} must be an integer{_range(minimum, maximum)}, got {value!r}")
+    raise ValueError(f"{name} must be an integer{_interval(minimum, maximum, None, None)}, "
+                     f"got {value!r}")
   return int(value)
 
 
@@ -140,16 +141,6 @@ def _is_real(value):
     return True
   return np.ndim(value) == 0 and np.issubdtype(np.asarray(value).dtype, np.number) and not \
       np.issubdtype(np.asarray(value).dtype, np.complexfloating)
-
-
-def _range(minimum, maximum):
-  if minimum is not None and maximum is not None:
-    return f" in [{minimum}, {maximum}]"
-  if minimum is not None:
-    return f" >= {minimum}"
-  if maximum is not None:
-    return f" <= {maximum}"
-  return ""
 
 
 def _interval(minimum, maximum, above, below):
