@@ -82,9 +82,11 @@ def run(*, num_gaussians, resolution, num_candidates, samples, probes, repeats):
   import numpy as np
 
   from mfsample import uncertainty as unc
+  from mfsample.baselines import fisher
   from mfsample.model import SamplerSpec
-  from mfsample.planning import fisher, poses
+  from mfsample.planning import poses
   from mfsample.renderer import RenderSettings
+  from mfsample.sharding import map_cameras
 
   rng = np.random.default_rng(0)
   model = random_model(num_gaussians)
@@ -113,7 +115,7 @@ def run(*, num_gaussians, resolution, num_candidates, samples, probes, repeats):
         h, _ = fisher.fisher_diagonal(det, camera, key, num_probes=k, settings=settings,
                                       background=bg, groups=tuple(inv))
         return sum(jnp.sum(h[g] * inv[g]) for g in h)
-      return unc.map_cameras(one, cams, inverse)
+      return map_cameras(one, cams, inverse)
     return lambda: fisher_candidates(jax.random.PRNGKey(1))
 
   probes = [int(k) for k in probes]

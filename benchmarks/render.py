@@ -199,9 +199,9 @@ def run_step(repeats, variant):
 
   from configs import train_lego
   from mfsample import RenderSettings, render
+  from mfsample.data import datasets as data_lib
   from mfsample.model import mean_gaussians
   from mfsample.renderer.budget import fit_budget, render_with_budget
-  from mfsample.train import data as data_lib
   from mfsample.train import loop
   from mfsample.train.step import make_train_step
 

@@ -79,7 +79,7 @@ def load_run(workdir, data=None):
   import ml_collections
 
   from mfsample._bench import require_scene_folder
-  from mfsample.train import data as data_lib
+  from mfsample.data import datasets as data_lib
   from mfsample.train import loop
 
   with open(os.path.join(workdir, "config.json")) as f:

@@ -174,8 +174,8 @@ def measure_variant(config, *, steps, warmup, from_checkpoints=None, clock="wall
   import jax.numpy as jnp
   import numpy as np
 
+  from mfsample.data import datasets as data_lib
   from mfsample.renderer.budget import fit_budget
-  from mfsample.train import data as data_lib
   from mfsample.train import loop
   from mfsample.train.step import make_train_step
 

@@ -13,24 +13,23 @@ config choice. A deterministic model renders M identical images: U = 0 exactly.
 
 Batches of candidate cameras are scored by `score_cameras`: `jax.lax.map` over chunks of
 cameras (memory bounded by one chunk of M renders) and, with several devices, a
-`jax.shard_map` that splits the cameras over them (`map_cameras`).
+`jax.shard_map` that splits the cameras over them (`mfsample.sharding`).
 """
 
 import functools
-import math
 from typing import NamedTuple
 
 import chex
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jax.sharding import AxisType, Mesh, PartitionSpec
 
 from mfsample import arg_checks, samplers
 from mfsample.camera import Camera
 from mfsample.renderer import TileStats, render
 from mfsample.renderer.budget import render_with_budget
 from mfsample.renderer.settings import RenderSettings
+from mfsample.sharding import default_num_devices, map_cameras, map_sharded
 
 
 class Uncertainty(NamedTuple):
@@ -159,62 +158,7 @@ def _uncertainty(model, camera, z, *, settings, background, num_devices):
                     pixel_map=arg_checks.nan_unless(ok, u.pixel_map))
 
 
-# ------------------------------------------------------------------ batches, devices
-
-
-def map_sharded(fn, xs, *args, chunk_size=1, num_devices=1):
-  """fn(x, *args) for every x of a batch `xs` (a pytree with a leading axis); inside jit.
-
-  The batch is processed `chunk_size` at a time (`jax.lax.map` with a vmapped chunk), so
-  memory holds one chunk. With `num_devices` > 1 it is split over the first `num_devices`
-  devices with `jax.shard_map` (args replicated) and each device maps over its share. The
-  batch is padded with copies of its last element to a multiple of num_devices *
-  chunk_size; the padding is dropped from the result.
-
-  Under vmap (chunk_size > 1) the renderer skips unused budget only as far as the whole
-  chunk allows; chunk_size = 1 is the safe choice on a CPU, larger chunks pay off on
-  accelerators.
-
-  Args:
-    fn: (one element of xs, *args) -> pytree of arrays.
-    xs: pytree whose leaves share a leading axis [B] (a batched `Camera`, M `Gaussians`).
-    *args: replicated arguments (pytrees).
-    chunk_size: elements vmapped together.
-    num_devices: devices to shard the batch over (static).
-
-  Returns:
-    fn's pytree with a leading [B] axis.
-  """
-  b = jax.tree.leaves(xs)[0].shape[0]
-  per_device = chunk_size * math.ceil(b / (num_devices * chunk_size))
-  total = per_device * num_devices
-  if total != b:
-    idx = jnp.minimum(jnp.arange(total), b - 1)
-    xs = jax.tree.map(lambda x: x[idx], xs)
-
-  def local(batch, *a):
-    # batch_size=1 would still vmap (over a unit axis) and lose the renderer's skipping.
-    size = None if chunk_size == 1 else chunk_size
-    return jax.lax.map(lambda x: fn(x, *a), batch, batch_size=size)
-
-  if num_devices == 1:
-    out = local(xs, *args)
-  else:
-    # Auto axes: inside jit, XLA moves the (unsharded) inputs onto the mesh as needed.
-    mesh = Mesh(np.asarray(jax.devices()[:num_devices]), ("batch",),
-                axis_types=(AxisType.Auto,))
-    specs = (PartitionSpec("batch"),) + (PartitionSpec(),) * len(args)
-    out = jax.shard_map(local, mesh=mesh, in_specs=specs, out_specs=PartitionSpec("batch"),
-                        check_vma=False)(xs, *args)
-  return jax.tree.map(lambda x: x[:b], out)
-
-
-def map_cameras(fn, cameras: Camera, *args, chunk_size=1, num_devices=1):
-  """`map_sharded` over a `Camera` batched over one axis [B]: fn(camera, *args) each."""
-  if len(cameras.batch_shape) != 1:
-    raise ValueError(f"map_cameras takes a Camera batched over one axis, got "
-                     f"{cameras.batch_shape}")
-  return map_sharded(fn, cameras, *args, chunk_size=chunk_size, num_devices=num_devices)
+# ------------------------------------------------------------------ batches of cameras
 
 
 class CameraScores(NamedTuple):
@@ -246,11 +190,6 @@ def _score(model, cameras, z, background, *, settings, chunk_size, num_devices, 
   values = arg_checks.nan_unless(ok, values)
   maps = None if maps is None else arg_checks.nan_unless(ok, maps)
   return CameraScores(values, maps, stats)
-
-
-def default_num_devices(num_items):
-  """Devices to shard over: all of them, but not more than there are items."""
-  return max(1, min(jax.device_count(), int(num_items)))
 
 
 def score_cameras(model, cameras: Camera, z, *, settings: RenderSettings, background=None,

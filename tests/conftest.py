@@ -21,7 +21,7 @@ if "xla_backend_optimization_level" not in os.environ.get("XLA_FLAGS", ""):
 import pytest  # noqa: E402
 
 from configs import train as train_configs  # noqa: E402
-from mfsample.train import data as data_lib  # noqa: E402
+from mfsample.data import datasets as data_lib  # noqa: E402
 
 
 def float64():

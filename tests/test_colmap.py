@@ -219,7 +219,7 @@ def test_errors_name_what_is_missing(tmp_path, capture):
 def test_training_data_and_sfm_initialisation(capture):
   """data.kind = "colmap": every 2nd image held out, the points' box, and a model that starts
   at the SfM points with their colours (the 3DGS initialisation)."""
-  from mfsample.train import data as data_lib
+  from mfsample.data import datasets as data_lib
   from mfsample.train import init_state, make_setup
 
   root, *_ = capture

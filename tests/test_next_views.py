@@ -61,14 +61,14 @@ def test_tiny_job_resumes_and_refuses_another_config(joint_run):
 def test_colmap_capture_and_a_ply_get_posthoc_uncertainty(joint_run, tmp_path):
   """A COLMAP capture of the synthetic scene and the .ply the joint run wrote: B_hat is fitted
   to the frozen model, the candidates are new poses on a sphere."""
-  from mfsample.data import PointCloud, export_colmap
+  from mfsample.data import PointCloud, export_colmap, synthetic
+  from mfsample.data import datasets as data_lib
   from mfsample.data.ply import load_ply
-  from mfsample.train import data as data_lib
 
   config = uncertainty_configs.get_config("tiny")
   dataset = data_lib.load_dataset(config.data)
   both = dataset.train.subset(range(12)).replace(names=())
-  xyz = np.asarray(data_lib.synthetic_gaussians(config.data.synthetic.num_gaussians, 0).means)
+  xyz = np.asarray(synthetic.synthetic_gaussians(config.data.synthetic.num_gaussians, 0).means)
   export_colmap(tmp_path / "capture", both, PointCloud(xyz, np.full_like(xyz, 0.5)))
   ply = os.path.join(joint_run[0], "point_cloud.ply")
   config.data.kind = "colmap"

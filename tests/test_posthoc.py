@@ -34,7 +34,7 @@ def pretrained(tmp_path_factory):
   """The tiny capture, and as the "pretrained" model the Gaussians that rendered it (the mean
   sits at the optimum) plus Gaussians far away where no camera looks, SH degree 1 (zero
   band-1 coefficients): the shapes of the docs' example (capacity 256)."""
-  from mfsample.train import data as data_lib
+  from mfsample.data import synthetic
 
   root = tmp_path_factory.mktemp("pretrained")
   capture, _ = mf.testing.write_tiny_capture(root)
@@ -46,7 +46,7 @@ def pretrained(tmp_path_factory):
   # Outside every frustum: the half-diagonal of the field of view is 0.57 rad.
   far = far[np.arccos(np.clip(far @ looks.T, -1, 1)).min(axis=1) > 0.65][:NUM_UNSEEN]
   assert len(far) == NUM_UNSEEN
-  raw = raw_from_gaussians(data_lib.synthetic_gaussians(200, 0))
+  raw = raw_from_gaussians(synthetic.synthetic_gaussians(200, 0))
   m = NUM_UNSEEN
   extra = {"means": 30.0 * far, "log_scales": np.full((m, 3), -1.0),
            "quats": np.tile([1.0, 0, 0, 0], (m, 1)), "opacity_logits": np.zeros(m),

@@ -11,10 +11,10 @@ import pytest
 from conftest import tiny_config
 
 from mfsample import samplers
+from mfsample.data import datasets as data_lib
 from mfsample.data.ply import load_ply
 from mfsample.renderer import render
 from mfsample.train import checkpoint as ckpt
-from mfsample.train import data as data_lib
 from mfsample.train import densify as densify_lib
 from mfsample.train import evaluate as eval_lib
 from mfsample.train import loop, losses

@@ -1,14 +1,25 @@
-"""Datasets: posed images with the camera conventions of `mfsample.camera`; 3DGS `.ply` files."""
+"""Datasets: posed images with the camera conventions of `mfsample.camera`; 3DGS `.ply` files.
 
-from mfsample.data._io import DatasetError
+* loaders and writers: `load_blender` / `export_blender`, `load_colmap` / `export_colmap`,
+  `load_llff`, `load_ply` / `export_ply`;
+* `load_dataset(config.data)`: the training and test views a config names, dispatched on
+  `config.data.kind` over `DATA_KINDS` (`datasets`);
+* `synthetic`: random ground-truth scenes rendered by mfsample (no files).
+"""
+
+from mfsample.data._io import DatasetError, resolve_path
 from mfsample.data.blender import available_splits, load_blender
 from mfsample.data.colmap import PointCloud, export_colmap, load_colmap
+from mfsample.data.datasets import DATA_KINDS, FILE_KINDS, Dataset, load_dataset, scene_extent
 from mfsample.data.export import export_blender
 from mfsample.data.llff import load_llff, poses_bounds_from_cameras
 from mfsample.data.ply import export_ply, load_ply
 from mfsample.data.views import Views
 
 __all__ = [
+    "DATA_KINDS",
+    "FILE_KINDS",
+    "Dataset",
     "DatasetError",
     "PointCloud",
     "Views",
@@ -18,7 +29,10 @@ __all__ = [
     "export_ply",
     "load_blender",
     "load_colmap",
+    "load_dataset",
     "load_llff",
     "load_ply",
     "poses_bounds_from_cameras",
+    "resolve_path",
+    "scene_extent",
 ]

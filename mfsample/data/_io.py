@@ -5,6 +5,7 @@ to float32 / `Camera` at the end.
 """
 
 import json
+import os
 from pathlib import Path
 
 import numpy as np
@@ -19,6 +20,11 @@ IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 
 class DatasetError(ValueError):
   """A dataset file exists but its content is unusable (the message names the file)."""
+
+
+def resolve_path(path):
+  """`path` with `~` expanded, made absolute (relative paths: to the working directory)."""
+  return Path(os.path.expanduser(str(path))).resolve()
 
 
 def require_dir(path, what="dataset folder"):

@@ -93,7 +93,7 @@ def _scene_data(cfg, n):
   import tqdm
 
   from mfsample import scenes
-  from mfsample.train.data import resolve_path
+  from mfsample.data import resolve_path
 
   scene = scenes.get_scene(cfg.scene)
   w, h = int(cfg.width), int(cfg.height)
@@ -119,7 +119,7 @@ _LAMBERT_BANDS = (math.pi, 2.0 * math.pi / 3.0, math.pi / 4.0, 0.0)
 def synthetic_truth(cfg, n):
   """(`Gaussians`, [N, n, 3] per-Gaussian radiance under each basis light) of the synthetic
   diffuse scene: a shell of opaque Gaussians, albedo uniform in [0.1, 0.9]."""
-  from mfsample.planning.pool import synthetic_scene
+  from mfsample.data.synthetic import synthetic_scene
 
   s = cfg.synthetic
   truth = synthetic_scene(int(s.num_gaussians), int(s.seed), radius=float(s.radius))

@@ -30,7 +30,8 @@ from mfsample.lighting import lights as lights_lib
 from mfsample.lighting import uncertainty as lu
 from mfsample.renderer.budget import BudgetExceededError
 from mfsample.renderer.settings import RenderSettings
-from mfsample.uncertainty import check_z, default_num_devices
+from mfsample.sharding import default_num_devices
+from mfsample.uncertainty import check_z
 
 
 @dataclasses.dataclass(frozen=True)

@@ -30,20 +30,20 @@ import numpy as np
 import optax
 
 from mfsample import samplers
+from mfsample.data.datasets import scene_extent
 from mfsample.lighting import field
 from mfsample.model import SamplerSpec, project_spread
 from mfsample.train import checkpoint as ckpt
 from mfsample.train import densify as densify_lib
 from mfsample.train import losses, optim
-from mfsample.train.data import scene_extent
 from mfsample.train.loop import render_settings, with_grown_budget
 from mfsample.train.step import (
-    DensifyStats,
-    StepConfig,
-    StepMetrics,
-    TrainState,
-    init_train_state,
-    step_schedule,
+  DensifyStats,
+  StepConfig,
+  StepMetrics,
+  TrainState,
+  init_train_state,
+  step_schedule,
 )
 
 

@@ -18,7 +18,7 @@ and is differentiable w.r.t. xi (the paper's route: gradient ascent through the 
 the per-coefficient radiances (`field.render_basis`). Consequences: U(c xi) = c^2 U(xi), so
 lights are compared at one norm; U(e_j) = Q_jj; the best light of a given norm is Q's top
 eigenvector. Cameras are mapped (`jax.lax.map`) and, with several devices, sharded
-(`mfsample.uncertainty.map_cameras`), like candidate cameras.
+(`mfsample.sharding.map_cameras`), like candidate cameras.
 """
 
 import functools
@@ -36,7 +36,8 @@ from mfsample.lighting import lights as lights_lib
 from mfsample.renderer.budget import render_with_budget
 from mfsample.renderer.settings import RenderSettings
 from mfsample.renderer.tiles import TileStats
-from mfsample.uncertainty import check_z, default_num_devices, map_cameras, pixel_variance
+from mfsample.sharding import default_num_devices, map_cameras
+from mfsample.uncertainty import check_z, pixel_variance
 
 
 class LightUncertainty(NamedTuple):

@@ -60,7 +60,7 @@ def check_config(config):
     raise checks.ConfigError("config.views.train_every = 1 trains on every view and leaves no "
                              "unused candidate: set it > 1 or next_views.candidates = 'sphere'")
   if config.posthoc.ply:
-    from mfsample.train.data import resolve_path
+    from mfsample.data import resolve_path
     if not resolve_path(config.posthoc.ply).is_file():
       raise FileNotFoundError(f"config.posthoc.ply = {config.posthoc.ply!r}: no such file "
                               f"({resolve_path(config.posthoc.ply)})")
@@ -86,7 +86,7 @@ def run_uncertainty(config, workdir):
   Returns:
     the results dict also written to `results.json`.
   """
-  from mfsample.train import data as data_lib
+  from mfsample.data import datasets as data_lib
 
   check_config(config)
   check_workdir(config, workdir)
@@ -152,7 +152,7 @@ def run_uncertainty(config, workdir):
 
 
 def _scene_name(config):
-  from mfsample.train.data import resolve_path
+  from mfsample.data import resolve_path
   kind = config.data.kind
   if kind in ("blender", "colmap", "llff"):
     return resolve_path(config.data.path).name
@@ -161,8 +161,8 @@ def _scene_name(config):
 
 def _train_or_fit(config, dataset, train_views, workdir):
   """(`TrainResult`, "joint" | "posthoc") with checkpoints in `workdir/checkpoints`."""
+  from mfsample.data import resolve_path
   from mfsample.train import train
-  from mfsample.train.data import resolve_path
   from mfsample.train.posthoc import fit_spread
 
   checkpoint_dir = os.path.join(workdir, "checkpoints")

@@ -13,7 +13,9 @@ tiny synthetic scene) on the command line; every number is a field below.
 import ml_collections
 
 from mfsample import config_checks
+from mfsample.data import FILE_KINDS
 from mfsample.model import GROUPS
+from mfsample.planning.pool import POOL_KINDS
 from mfsample.planning.strategies import NAMES, TABLE1_NAMES
 from mfsample.train.config import LPIPS_NETS
 from mfsample.train.config import default_config as training_config
@@ -71,7 +73,8 @@ def default_config():
 
   # ----------------------------------------------------------------- data
   config.data = data = ml_collections.ConfigDict()
-  # "scene" (Mitsuba oracle), "blender" or "colmap" (fixed pools) or "synthetic".
+  # "scene" (Mitsuba oracle), "synthetic", or a dataset on disk, "blender", "colmap" or
+  # "llff" (fixed pools): `mfsample.planning.pool.POOL_KINDS`.
   data.kind = "scene"
   data.background = (1.0, 1.0, 1.0)  # White, as the captures are composited.
   data.progress = True  # Progress bars of the captures.
@@ -186,9 +189,6 @@ def default_config():
   return config
 
 
-DATA_KINDS = ("scene", "blender", "synthetic")
-
-
 def validate(config):
   """Checks every field of a planning config; `ConfigError` naming the field and its range.
 
@@ -218,7 +218,7 @@ def validate(config):
   c.check_sequence(config, "paired_references", item_choices=NAMES, min_length=0,
                    distinct=True)
 
-  kind = c.check_choice(config, "data.kind", DATA_KINDS)
+  kind = c.check_choice(config, "data.kind", POOL_KINDS)
   c.check_floats(config, "data.background", 3, minimum=0.0, maximum=1.0)
   c.check_bool(config, "data.progress")
   c.check_int(config, "data.pool_seed", minimum=0, maximum=2**31 - 2)  # test poses: seed + 1
@@ -226,7 +226,8 @@ def validate(config):
   for field in ("width", "height", "num_test", "spp", "downscale", "test_every"):
     c.check_int(config, f"data.{field}", minimum=1)
   num_candidates = c.check_int(config, "data.num_candidates", minimum=1)
-  if kind != "blender":  # a blender pool's size is known once loaded (the runner checks)
+  c.check_int(config, "data.holdout_every", minimum=2)
+  if kind not in FILE_KINDS:  # the size of a pool on disk is known once loaded (the runner checks)
     if max_views > num_candidates:
       raise c.ConfigError(f"config.max_views = {max_views} must be <= config.data."
                           f"num_candidates = {num_candidates} (selection strategies pick "

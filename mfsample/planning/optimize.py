@@ -33,10 +33,10 @@ from mfsample.camera import Camera
 from mfsample.planning import poses
 from mfsample.renderer.budget import render_with_budget
 from mfsample.renderer.settings import RenderSettings
+from mfsample.sharding import default_num_devices
 from mfsample.uncertainty import (
     check_background,
     check_z,
-    default_num_devices,
     sample_gaussians,
     uncertainty_of_samples,
 )

@@ -1,15 +1,16 @@
 """The data of a planning run: candidate pool, test views, and (when there is one) an oracle.
 
+`POOL_KINDS` is the one definition of what a planning config's `data.kind` may be:
+
 * "scene": a built-in Mitsuba scene (`mfsample.scenes`). Candidates and test views are
   captured once (cached on disk); the oracle captures any new pose, so the optimising
   strategies can run.
-* "blender": a NeRF Synthetic scene on disk (e.g. lego): candidates = the train split,
-  test = the test split. No oracle: only the selection strategies run.
-* "colmap": a COLMAP capture (`mfsample.data.load_colmap`): candidates = the images that are
-  not held out (every `holdout_every`-th by name is a test view), its sparse points for
-  round models that start from them. No oracle.
 * "synthetic": random ground-truth Gaussians rendered by `mfsample.render` (tests and the
   notebook): every pose has a ground truth, no files and no Mitsuba needed.
+* every dataset kind that is files on disk (`mfsample.data.FILE_KINDS`: NeRF Synthetic
+  "blender", "colmap", "llff"): candidates = its training views, test = its test views,
+  loaded by `mfsample.data.load_dataset`. No oracle: only the selection strategies run. A
+  COLMAP capture brings its sparse points, for round models that start from them.
 """
 
 import math
@@ -20,11 +21,12 @@ import jax.numpy as jnp
 import numpy as np
 
 from mfsample.camera import Camera
+from mfsample.data import FILE_KINDS, load_dataset, resolve_path
+from mfsample.data.synthetic import synthetic_scene
 from mfsample.data.views import Views
 from mfsample.planning import poses
 from mfsample.renderer import RenderSettings, render
 from mfsample.renderer.budget import render_with_budget
-from mfsample.train.data import resolve_path
 
 
 class Pool(NamedTuple):
@@ -56,17 +58,15 @@ class Pool(NamedTuple):
 
 def make_pool(cfg) -> Pool:
   """The `Pool` that the `data` block of a planning config describes."""
+  if cfg.kind not in POOL_KINDS:
+    raise ValueError(f"data.kind must be one of {', '.join(map(repr, POOL_KINDS))}, got "
+                     f"{cfg.kind!r}")
   background = tuple(float(c) for c in cfg.background)
   if cfg.kind == "scene":
     return _scene_pool(cfg, background)
-  if cfg.kind == "blender":
-    return _blender_pool(cfg, background)
   if cfg.kind == "synthetic":
     return _synthetic_pool(cfg, background)
-  if cfg.kind == "colmap":
-    return _colmap_pool(cfg, background)
-  raise ValueError(f"data.kind must be 'scene', 'blender', 'colmap' or 'synthetic', got "
-                   f"{cfg.kind!r}")
+  return _file_pool(cfg, background)
 
 
 def _scene_pool(cfg, background):
@@ -89,72 +89,37 @@ def _scene_pool(cfg, background):
               poses.SphereSpec.from_scene(scene, w, h), oracle)
 
 
-def _blender_pool(cfg, background):
-  from mfsample.data import load_blender
-
-  path = resolve_path(cfg.path)
-  kw = dict(downscale=int(cfg.downscale), background=background)
-  candidates = load_blender(path, "train", **kw)
-  test = load_blender(path, "test", **kw)
-  if int(cfg.test_every) > 1:
-    test = test.subset(np.arange(0, len(test), int(cfg.test_every)))
-  lo, hi = cfg.bounds
-  return Pool(path.name, candidates, test, background, (np.full(3, lo), np.full(3, hi)),
-              poses.SphereSpec.from_cameras(candidates.cameras), None)
-
-
-def _colmap_pool(cfg, background):
-  from mfsample.train.data import load_dataset
-
+def _file_pool(cfg, background):
+  """A fixed pool from a dataset on disk: its training views are the candidates."""
   data = load_dataset(_as_training_data(cfg))
-  # The cameras of a capture look at the scene, not at the origin: the sphere of the figures
-  # is centred on the middle of the sparse points (or of the box without points).
-  center = 0.5 * (np.asarray(data.bounds[0], np.float64) + np.asarray(data.bounds[1]))
-  return Pool(resolve_path(cfg.path).name, data.train, data.test, background, data.bounds,
-              poses.SphereSpec.from_cameras(data.train.cameras, center), None, data.points)
+  if cfg.kind == "blender":  # NeRF Synthetic: the cube `cfg.bounds` around the origin
+    lo, hi = cfg.bounds
+    bounds = (np.full(3, float(lo)), np.full(3, float(hi)))
+    sphere = poses.SphereSpec.from_cameras(data.train.cameras)
+  else:
+    # The cameras of a capture look at the scene, not at the origin: the sphere of the
+    # figures is centred on the middle of its box (the sparse points', or the frusta's).
+    bounds = data.bounds
+    center = 0.5 * (np.asarray(bounds[0], np.float64) + np.asarray(bounds[1]))
+    sphere = poses.SphereSpec.from_cameras(data.train.cameras, center)
+  return Pool(resolve_path(cfg.path).name, data.train, data.test, background, bounds,
+              sphere, None, data.points)
 
 
 def _as_training_data(cfg):
-  """The `data` block of a training config for the capture a planning config names."""
+  """The `data` block of a training config for the dataset a planning config names (its
+  `bounds` is the random initial cloud's cube, a training config's `init_bounds`)."""
   from mfsample.train.config import default_config
 
   data = default_config().data
-  data.kind = "colmap"
+  data.kind = cfg.kind
   data.path = cfg.path
   data.downscale = int(cfg.downscale)
+  data.test_every = int(cfg.test_every)
   data.holdout_every = int(cfg.get("holdout_every", 8))
   data.background = tuple(cfg.background)
+  data.init_bounds = tuple(cfg.bounds)
   return data
-
-
-def synthetic_scene(num, seed, radius=0.6, sh_degree=0, shape="shell"):
-  """Random ground-truth Gaussians: an opaque "shell" (on the sphere of `radius`: every view
-  sees one side of a closed surface and none sees through it) or a "cloud" (in the cube
-  [-radius, radius]^3)."""
-  from mfsample.gaussians import Gaussians
-  from mfsample.renderer.sh import rgb_to_sh_dc
-
-  rng = np.random.default_rng(seed)
-  k = (sh_degree + 1) ** 2
-  sh = np.zeros((num, k, 3), np.float32)
-  sh[:, 0] = np.asarray(rgb_to_sh_dc(rng.uniform(0.05, 0.95, (num, 3))))
-  if shape == "shell":
-    means = rng.normal(size=(num, 3))
-    means *= radius / np.linalg.norm(means, axis=1, keepdims=True)
-    # Footprints that overlap into a closed surface: about 2x the mean spacing.
-    size = 2.0 * radius * np.sqrt(4.0 * np.pi / num)
-    scales = np.exp(rng.uniform(np.log(0.6 * size), np.log(size), (num, 3)))
-    opacities = rng.uniform(0.85, 0.99, num)
-  elif shape == "cloud":
-    means = rng.uniform(-radius, radius, (num, 3))
-    scales = np.exp(rng.uniform(np.log(0.03), np.log(0.12), (num, 3)))
-    opacities = rng.uniform(0.5, 0.95, num)
-  else:
-    raise ValueError(f"synthetic shape must be 'shell' or 'cloud', got {shape!r}")
-  return Gaussians(
-      means=jnp.asarray(means, jnp.float32), scales=jnp.asarray(scales, jnp.float32),
-      quats=jnp.asarray(rng.normal(size=(num, 4)), jnp.float32),
-      opacities=jnp.asarray(opacities, jnp.float32), sh=jnp.asarray(sh))
 
 
 def _synthetic_pool(cfg, background):
@@ -181,6 +146,9 @@ def _synthetic_pool(cfg, background):
   r = float(s.radius) + 0.2
   return Pool("synthetic", views(int(cfg.num_candidates), 0), views(int(cfg.num_test), 1),
               background, (np.full(3, -r), np.full(3, r)), sphere, oracle)
+
+
+POOL_KINDS = ("scene", "synthetic") + FILE_KINDS
 
 
 def stack_cameras(cameras):

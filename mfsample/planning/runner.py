@@ -22,7 +22,6 @@ first round of the three "Ours" variants) are shared through an in-memory cache.
 """
 
 import collections
-import functools
 import hashlib
 import json
 import os
@@ -37,14 +36,13 @@ from mfsample import metrics as metrics_lib
 from mfsample import uncertainty as unc
 from mfsample import workdir as workdir_lib
 from mfsample._json import atomic_path, write_json, write_text
+from mfsample.baselines import activenerf
 from mfsample.data._io import area_downscale
 from mfsample.data.views import Views
-from mfsample.model import mean_gaussians
-from mfsample.planning import figures, poses, strategies, tables, training, variance, workdirs
+from mfsample.planning import figures, poses, strategies, tables, training, workdirs
 from mfsample.planning.config import validate
 from mfsample.planning.pool import Pool, make_pool, stack_cameras
-from mfsample.renderer import render
-from mfsample.renderer.budget import render_with_budget
+from mfsample.train.evaluate import mean_metrics
 
 
 class Selected(NamedTuple):
@@ -221,7 +219,7 @@ class Trainer:
       trained = self.round_state(base, selected, seed)
       a = self.config.strategy.activenerf
       t0 = time.perf_counter()
-      vmodel, _ = variance.fit_variance(
+      vmodel, _ = activenerf.fit_variance(
           trained.model, as_views(selected, int(self.config.rounds.downscale)),
           settings=trained.settings,
           background=self.pool.background, steps=int(a.steps), lr=float(a.lr),
@@ -240,44 +238,6 @@ class Trainer:
       return self._train(self.config.final_train, selected, seed, "final").model
 
     return self._cached(("final", seed, keys), make)
-
-
-@functools.partial(jax.jit, static_argnames=("settings",))
-def render_views(model, cameras, background, *, settings):
-  """[V, H, W, 3] renders of the mean model (one after another: cheap budget skipping)."""
-  gaussians = mean_gaussians(model)
-
-  def one(camera):
-    out = render(gaussians, camera, background=background, settings=settings)
-    return jnp.clip(out.rgb, 0.0, 1.0), out.stats
-
-  return jax.lax.map(one, cameras)
-
-
-@jax.jit
-def _image_metrics(pred, gt):
-  """Per-view PSNR and SSIM of [V, H, W, 3] batches (`mfsample.metrics`)."""
-  return metrics_lib.psnr(pred, gt), metrics_lib.ssim(pred, gt)
-
-
-def evaluate_model(model, views: Views, *, background, settings, lpips_fn=None):
-  """Test metrics of a model's mean: {"psnr", "ssim", "lpips"}, means over `views`.
-
-  All views are rendered in one jitted call and scored in batches (PSNR and SSIM of
-  `mfsample.metrics`, LPIPS of `lpips_fn`), instead of one host round trip per view.
-
-  Returns:
-    (metrics dict, settings that sufficed).
-  """
-  bg = jnp.asarray(background, jnp.float32)
-  (pred, _), settings = render_with_budget(render_views, settings, model, views.cameras, bg,
-                                          stats_of=lambda out: out[1])
-  gt = jnp.asarray(views.images, jnp.float32)
-  psnr, ssim = _image_metrics(pred, gt)
-  out = {"psnr": float(np.mean(psnr)), "ssim": float(np.mean(ssim)), "lpips": None}
-  if lpips_fn is not None:
-    out["lpips"] = float(np.mean(np.asarray(lpips_fn(pred, gt))))
-  return out, settings
 
 
 def scoring_start(config):
@@ -469,7 +429,7 @@ def run_camera_planning(config, workdir):
     metrics = {}
     for n in eval_views:
       model = trainer.final_model(selected[:n], seed)
-      metrics[n], budgets["eval"] = evaluate_model(
+      metrics[n], budgets["eval"] = mean_metrics(
           model, pool.test, background=pool.background, lpips_fn=lpips_fn,
           settings=budgets.get("eval") or trainer.settings.get("final"))
       bar.update(1)

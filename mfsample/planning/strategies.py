@@ -10,8 +10,8 @@ be captured by an oracle), and a pure `select(inputs, key) -> Choice`.
 | random        | -                 | uniformly among the unused candidates                    |
 | farthest      | Farthest Point    | max over candidates of the min distance to the training  |
 |               |                   | camera centres                                           |
-| activenerf    | ActiveNeRF        | max rendered variance (`variance`)                       |
-| fisher        | FisherRF          | max sum_d H_cand / (H_train + 1e-6) (`fisher`)           |
+| activenerf    | ActiveNeRF        | max rendered variance (`activenerf`)                     |
+| fisher        | FisherRF          | max sum_d H_cand / (H_train + 1e-6) (`baselines.fisher`) |
 | acp           | ACP               | max gain of grid coverage + angular uniformity (`acp`)   |
 | ours_sel      | Ours (Sel.)       | max U (Eq. 10) over the candidates                       |
 | ours_opt_sel  | Ours (Opt. Sel.)  | Adam on -U from the Ours (Sel.) choice (`optimize`)      |
@@ -28,9 +28,11 @@ import jax.numpy as jnp
 import numpy as np
 
 from mfsample import uncertainty as unc
+from mfsample.baselines import acp, activenerf, fisher
 from mfsample.camera import Camera
-from mfsample.planning import acp, fisher, optimize, poses, variance
+from mfsample.planning import optimize, poses
 from mfsample.renderer import RenderSettings
+from mfsample.sharding import default_num_devices
 
 LABELS = {
     "random": "Random",
@@ -54,7 +56,7 @@ class Inputs(NamedTuple):
 
   Attributes:
     model: the model of the strategy's `model_kind`, trained on the current views (a
-      `mfsample.model.Model`, or a `variance.VarianceModel`), or None.
+      `mfsample.model.Model`, or a `baselines.activenerf.VarianceModel`), or None.
     train_cameras: `Camera` [V] of the current training views.
     candidates: `Camera` [C] of the pool.
     available: [C] bool, candidates not selected yet.
@@ -208,7 +210,7 @@ def fisher_strategy(cfg) -> Strategy:
         inputs.model, _small(inputs.train_cameras, cfg), _small(inputs.candidates, cfg), key,
         settings=_settings(inputs, "score"), background=inputs.background,
         num_probes=int(cfg.probes), train_probes=int(cfg.train_probes), reg=float(cfg.reg),
-        groups=tuple(cfg.groups), num_devices=unc.default_num_devices(len(inputs.available)),
+        groups=tuple(cfg.groups), num_devices=default_num_devices(len(inputs.available)),
         pad_to=inputs.max_views)
     return _pick(inputs, out.values, settings={"score": settings})
 
@@ -216,16 +218,16 @@ def fisher_strategy(cfg) -> Strategy:
 
 
 def activenerf_strategy(cfg) -> Strategy:
-  """ActiveNeRF-style: the candidate with the largest rendered variance (`variance`).
+  """ActiveNeRF-style: the candidate with the largest rendered variance (`baselines.activenerf`).
 
   cfg fields: score_downscale (image size divisor while scoring); the variance fit's
   fields are read by the runner (`runner.Trainer`).
   """
   def select(inputs, key):
     del key
-    scores, settings = variance.variance_scores(
+    scores, settings = activenerf.variance_scores(
         inputs.model, _small(inputs.candidates, cfg), settings=_settings(inputs, "score"),
-        num_devices=unc.default_num_devices(len(inputs.available)))
+        num_devices=default_num_devices(len(inputs.available)))
     return _pick(inputs, scores, settings={"score": settings})
 
   return Strategy("activenerf", "variance", False, select)
@@ -242,7 +244,7 @@ def _ours_scores(inputs, cfg, cameras=None):
   out, settings = unc.score_cameras(
       model, _small(cameras, cfg), z, settings=_settings(inputs, "score"),
       background=jnp.asarray(inputs.background), chunk_size=int(cfg.chunk_size),
-      num_devices=unc.default_num_devices(cameras.batch_shape[0]))
+      num_devices=default_num_devices(cameras.batch_shape[0]))
   return np.asarray(out.values), settings
 
 

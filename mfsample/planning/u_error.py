@@ -21,6 +21,7 @@ from mfsample import uncertainty as unc
 from mfsample.planning import poses
 from mfsample.renderer import RenderSettings
 from mfsample.renderer.budget import render_with_budget
+from mfsample.train.evaluate import render_mean_views
 
 
 class UError(NamedTuple):
@@ -65,12 +66,10 @@ def u_against_error(model, candidates, used, z, *, background, center=(0.0, 0.0,
   """
   from scipy.stats import spearmanr
 
-  from mfsample.planning.runner import render_views  # the runner's batched mean render
-
   settings = dict(settings or {})
   bg = jnp.asarray(background, jnp.float32)
   (pred, _), settings["mean"] = render_with_budget(
-      render_views, settings.get("mean", RenderSettings(max_intersections=1 << 14)), model,
+      render_mean_views, settings.get("mean", RenderSettings(max_intersections=1 << 14)), model,
       candidates.cameras, bg, stats_of=lambda out: out[1])
   error = np.mean((np.asarray(pred) - np.asarray(candidates.images)) ** 2, axis=(1, 2, 3))
   small = poses.downscale_camera(candidates.cameras, int(score_downscale))

@@ -60,7 +60,7 @@ def arc_views(data, scene_name):
   cameras = arc_cameras(data.arc, data.width, data.height)
   if data.kind == "scene":
     from mfsample import scenes
-    from mfsample.train.data import resolve_path
+    from mfsample.data import resolve_path
 
     scene = scenes.get_scene(scene_name)
     cache = str(resolve_path(data.cache_dir)) if data.get("cache_dir") else None
@@ -76,7 +76,7 @@ def arc_views(data, scene_name):
 def _synthetic_views(data, cameras):
   """Random ground-truth Gaussians (an opaque shell) rendered by mfsample: depth is the
   expected depth of that render, alpha its coverage."""
-  from mfsample.planning.pool import synthetic_scene
+  from mfsample.data.synthetic import synthetic_scene
   from mfsample.renderer import RenderSettings, render
   from mfsample.renderer.budget import render_with_budget
 

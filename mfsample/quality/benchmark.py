@@ -28,10 +28,12 @@ import numpy as np
 from mfsample import metrics
 from mfsample import uncertainty as unc
 from mfsample._json import write_json
-from mfsample.planning import fisher, training, variance
+from mfsample.baselines import activenerf, fisher
+from mfsample.planning import training
 from mfsample.quality import arc as arc_lib
 from mfsample.quality import maps as maps_lib
 from mfsample.renderer.budget import render_with_budget
+from mfsample.train.evaluate import render_mean
 
 SAMPLER_KINDS = ("lowrank", "diagonal", "block")
 POSTHOC = "posthoc"
@@ -125,7 +127,7 @@ def same_mean(model, fitted):
              for g, v in model.params.mean.items())
 
 
-def evaluate_model(config, name, trained, train_views, test_views, seed):
+def ause_of_model(config, name, trained, train_views, test_views, seed):
   """Depth errors, every method's maps and their AUSE at the test views of one model.
 
   Args:
@@ -146,12 +148,12 @@ def evaluate_model(config, name, trained, train_views, test_views, seed):
   methods = method_keys(config, name)
   renders, errors, masks = [], [], []
   for i in range(len(test_views)):
-    out, settings = render_with_budget(maps_lib.mean_render, settings, model,
-                                       test_views.cameras[i], bg)
-    err, mask = maps_lib.depth_error(out.depth, out.alpha, test_views.depths[i],
+    out, settings = render_with_budget(render_mean, settings, model, test_views.cameras[i],
+                                       bg)
+    err, mask = maps_lib.depth_error(out.expected_depth(), out.alpha, test_views.depths[i],
                                      test_views.alphas[i], true_alpha_min=float(m.true_alpha_min),
                                      model_alpha_min=float(m.model_alpha_min))
-    renders.append(np.asarray(out.rgb))
+    renders.append(np.asarray(jnp.clip(out.rgb, 0.0, 1.0)))
     errors.append(err)
     masks.append(mask)
   maps, settings, extra = _method_maps(config, name, model, settings, train_views, test_views,
@@ -216,7 +218,7 @@ def _method_maps(config, name, model, settings, train_views, test_views, seed):
       out["fisher"].append(np.asarray(u))
   if "activenerf" in config.ause.baselines:
     a = config.activenerf
-    vmodel, _ = variance.fit_variance(
+    vmodel, _ = activenerf.fit_variance(
         model, train_views, settings=settings, background=bg, steps=int(a.steps),
         lr=float(a.lr), prior_var=float(a.prior_var), beta_min=float(a.beta_min),
         prior_weight=float(a.prior_weight), seed=int(seed))
@@ -275,7 +277,7 @@ def run_ause(config, workdir, bar=None):
           trained = training.train_on_views(model_config(config.train, name), train_views,
                                             seed=int(seed), bounds=bounds,
                                             pad_to=len(train_views))
-          record, arrays = evaluate_model(config, name, trained, train_views, test_views,
+          record, arrays = ause_of_model(config, name, trained, train_views, test_views,
                                           int(seed))
           record.update(scene=scene, seed=int(seed), train_views=train_idx.tolist(),
                         test_views=test_idx.tolist(), seconds=time.perf_counter() - t0)

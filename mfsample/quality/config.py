@@ -16,8 +16,8 @@ selects variants (the candidates part, a tiny one for tests); every number is a 
 
 import ml_collections
 
+from mfsample.baselines.fisher import DEFAULT_GROUPS as FISHER_GROUPS
 from mfsample.planning.config import default_config as planning_config
-from mfsample.planning.fisher import DEFAULT_GROUPS as FISHER_GROUPS
 from mfsample.train.config import default_config as training_config
 
 
@@ -60,8 +60,8 @@ def default_config():
   # with rank 1, 2 (the paper's), 4, 10, and the paper's ablation covariances.
   a.samplers = ("lowrank:1", "lowrank:2", "lowrank:4", "lowrank:10", "diagonal", "block:2")
   # Baselines on a deterministic model: FisherRF's per-pixel uncertainty
-  # (`planning.fisher.fisher_pixel_variance`) and ActiveNeRF's rendered variance
-  # (`planning.variance.rendered_variance`). () trains no deterministic model.
+  # (`baselines.fisher.fisher_pixel_variance`) and ActiveNeRF's rendered variance
+  # (`baselines.activenerf.rendered_variance`). () trains no deterministic model.
   # "posthoc" (not by default): U of the same deterministic model after the fact, B_hat
   # fitted with its mean frozen (`mfsample.train.posthoc.fit_spread`), as for a pretrained
   # 3DGS model; its colour U and depth variance are scored as Ours'.
@@ -107,12 +107,12 @@ def default_config():
 
   config.train = _training()  # The models (`mfsample.train` config); sampler set per model.
 
-  config.fisher = fisher = ml_collections.ConfigDict()  # FisherRF (planning.fisher).
+  config.fisher = fisher = ml_collections.ConfigDict()  # FisherRF (baselines.fisher).
   fisher.train_probes = 32  # Rademacher probes per training view for H(train) (a denominator).
   fisher.pixel_probes = 64  # Parameter probes per test view: relative noise <= sqrt(2 / 64).
   fisher.reg = 1e-6  # lambda of 1 / (H(train) + lambda) (FisherRF).
   fisher.groups = FISHER_GROUPS  # Parameter groups (FisherRF leaves out rotations).
-  config.activenerf = an = ml_collections.ConfigDict()  # ActiveNeRF (planning.variance).
+  config.activenerf = an = ml_collections.ConfigDict()  # ActiveNeRF (baselines.activenerf).
   an.steps = 200  # Adam steps of the per-Gaussian log-variance fit (one view each).
   an.lr = 0.05  # Its learning rate.
   an.prior_var = 0.05  # Variance of Gaussians no view constrains.

@@ -8,9 +8,9 @@ For a test camera and a trained model:
 * Ours (any sampler), from M samples theta(z_m) of the field (`sample_maps`):
   colour U(p) = (1/M) sum_m ||C_m(p) - C_mean(p)||^2 (Eq. 10's per-pixel term), and the
   variance over the samples of their expected depth d_m(p), which the paper does not report;
-* FisherRF: `mfsample.planning.fisher.fisher_pixel_variance`, the per-pixel terms of its
+* FisherRF: `mfsample.baselines.fisher.fisher_pixel_variance`, the per-pixel terms of its
   candidate score, with H over the training views;
-* ActiveNeRF: the rendered variance beta^2(p) of `mfsample.planning.variance`.
+* ActiveNeRF: the rendered variance beta^2(p) of `mfsample.baselines.activenerf`.
 """
 
 import functools
@@ -21,26 +21,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from mfsample.baselines.activenerf import rendered_variance
 from mfsample.model import mean_gaussians
-from mfsample.planning.variance import rendered_variance
 from mfsample.renderer import RenderSettings, TileStats, render
 from mfsample.uncertainty import pixel_variance, sample_gaussians
-
-
-class MeanRender(NamedTuple):
-  """The mean model seen from one camera.
-
-  Attributes:
-    rgb: [H, W, 3] colour, clipped to [0, 1].
-    alpha: [H, W] coverage.
-    depth: [H, W] expected camera z-depth (depth / alpha; 0 where alpha is ~0).
-    stats: `TileStats`.
-  """
-
-  rgb: chex.Array
-  alpha: chex.Array
-  depth: chex.Array
-  stats: TileStats
 
 
 class SampleMaps(NamedTuple):
@@ -55,13 +39,6 @@ class SampleMaps(NamedTuple):
   colour: chex.Array
   depth: chex.Array
   stats: TileStats
-
-
-@functools.partial(jax.jit, static_argnames=("settings",))
-def mean_render(model, camera, background, *, settings: RenderSettings) -> MeanRender:
-  """`MeanRender` of a model's mean Gaussians."""
-  out = render(mean_gaussians(model), camera, background=background, settings=settings)
-  return MeanRender(jnp.clip(out.rgb, 0.0, 1.0), out.alpha, out.expected_depth(), out.stats)
 
 
 @functools.partial(jax.jit, static_argnames=("settings",))
@@ -80,7 +57,7 @@ def sample_maps(model, camera, z, background, *, settings: RenderSettings) -> Sa
 
 @functools.partial(jax.jit, static_argnames=("settings",))
 def activenerf_map(vmodel, camera, *, settings: RenderSettings):
-  """ActiveNeRF's per-pixel variance beta^2(p) of a fitted `variance.VarianceModel`, and the
+  """ActiveNeRF's per-pixel variance beta^2(p) of a fitted `activenerf.VarianceModel`, and the
   render's `TileStats`."""
   return rendered_variance(mean_gaussians(vmodel.model), vmodel.log_var, camera,
                            vmodel.beta_min, settings=settings)

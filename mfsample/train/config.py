@@ -11,6 +11,7 @@ import ml_collections
 from ml_collections import config_dict
 
 from mfsample import config_checks
+from mfsample.data import DATA_KINDS
 from mfsample.model import GROUPS, SAMPLER_KINDS
 
 
@@ -166,8 +167,6 @@ def default_config():
   return config
 
 
-# Data kinds `mfsample.train.data.load_dataset` reads (a new kind adds its name here).
-DATA_KINDS = ("synthetic", "blender", "scene", "colmap", "llff")
 INIT_FROM = ("random", "points", "ply")  # mfsample.train.initial
 LPIPS_NETS = ("", "vgg16", "alexnet")
 
@@ -187,7 +186,7 @@ def validate(config, prefix="config"):
   kw = {"prefix": prefix}
   c.check_int(config, "seed", minimum=0, maximum=2**31 - 1, **kw)
 
-  c.check_choice(config, "data.kind", DATA_KINDS, **kw)
+  c.check_choice(config, "data.kind", tuple(DATA_KINDS), **kw)
   c.check_str(config, "data.path", **kw)
   c.check_int(config, "data.downscale", minimum=1, **kw)
   c.check_int(config, "data.test_every", minimum=1, **kw)

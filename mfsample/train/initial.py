@@ -55,7 +55,7 @@ def initial_model(config, setup, bounds, points, key):
     if not path:
       raise ValueError("config.model.init_from = 'ply' needs config.model.ply_path, the "
                        "3DGS point_cloud.ply to start from")
-    from mfsample.train.data import resolve_path
+    from mfsample.data import resolve_path
 
     path = resolve_path(path)
     mean = ply.load_ply(path)

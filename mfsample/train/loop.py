@@ -22,12 +22,12 @@ import numpy as np
 
 from mfsample import workdir as workdir_lib
 from mfsample._json import without_fields, write_json
+from mfsample.data import datasets as data_lib
 from mfsample.model import GROUPS, SamplerSpec, group_shapes
 from mfsample.renderer.budget import BudgetExceededError, fit_budget
 from mfsample.renderer.settings import RenderSettings
 from mfsample.samplers import sobol_z
 from mfsample.train import checkpoint as ckpt
-from mfsample.train import data as data_lib
 from mfsample.train import densify as densify_lib
 from mfsample.train import initial, optim
 from mfsample.train.config import validate

@@ -43,7 +43,7 @@ import numpy as np
 from mfsample.model import activate
 from mfsample.renderer import RenderSettings, render
 from mfsample.renderer.budget import render_with_budget
-from mfsample.uncertainty import map_cameras
+from mfsample.sharding import map_cameras
 
 # FisherRF leaves the rotations out (its default `--filter_out_grad rotation`).
 DEFAULT_GROUPS = ("means", "log_scales", "opacity_logits", "sh_dc", "sh_rest")

@@ -34,8 +34,8 @@ import optax
 from mfsample.model import mean_gaussians
 from mfsample.renderer import RenderSettings, render
 from mfsample.renderer.budget import render_with_budget
+from mfsample.sharding import map_cameras
 from mfsample.train.evaluate import render_mean
-from mfsample.uncertainty import map_cameras
 
 
 class VarianceModel(NamedTuple):

@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 from conftest import tiny_config
 
-from mfsample.train import data as data_lib
+from mfsample.data import datasets as data_lib
+from mfsample.data import resolve_path
 
 
 def test_synthetic_dataset(tiny_dataset):
@@ -25,8 +26,8 @@ def test_blender_without_data_fails_clearly(tmp_path):
 
 def test_relative_paths_resolve_against_the_working_directory(tmp_path, monkeypatch):
   monkeypatch.chdir(tmp_path)
-  assert data_lib.resolve_path("scene") == tmp_path.resolve() / "scene"
-  assert str(data_lib.resolve_path("/abs/path")) == "/abs/path"
+  assert resolve_path("scene") == tmp_path.resolve() / "scene"
+  assert str(resolve_path("/abs/path")) == "/abs/path"
 
 
 def test_unknown_kind_is_an_error():
