@@ -4,8 +4,10 @@ The convention of the whole API (`mfsample.camera` is the model):
 
 * Shapes, dtypes and counts are static, also under `jit`: they are checked always, and a bad
   one raises a `ValueError` naming the argument.
-* Values (finiteness, ranges) are checked when they are concrete, once per call on the host.
-  Under `jit`, `vmap` or `grad` a value cannot raise; a function whose answer a bad value
+* Values (finiteness, ranges) are checked when they are on the host (numpy arrays, Python
+  numbers), once per call. A JAX array is not fetched from the device to be checked (that
+  would synchronise every call of a hot loop) unless the function syncs anyway, and under
+  `jit`, `vmap` or `grad` a value cannot raise: there, a function whose answer a bad value
   would make silently finite and wrong returns NaN instead (`nan_unless`), which every
   finiteness check downstream catches.
 
@@ -78,15 +80,20 @@ def first_non_finite(x):
   return tuple(int(i) for i in np.argwhere(bad)[0]) if np.any(bad) else None
 
 
-def check_finite(name, x, *, axis_name=None):
-  """ValueError naming `name` and the first index where concrete `x` is not finite (NaN or
-  inf); nothing for traced values. `axis_name` names the leading axis in the message
-  ("sample", "row"): the error then names the leading index only."""
+def check_finite(name, x, *, axis_name=None, sync=False):
+  """ValueError naming `name` and the first index where `x` is not finite (NaN or inf).
+
+  Host values (numpy, Python) are checked; traced values never; a concrete JAX array only
+  with `sync` (one flag is fetched from the device, the array itself only when it is bad).
+  `axis_name` names the leading axis in the message ("sample", "row"): the error then names
+  the leading index only.
+  """
   if is_traced(x):
     return
   if isinstance(x, jax.Array):
-    if x.size == 0 or not jnp.issubdtype(x.dtype, jnp.inexact) or bool(all_finite(x)):
-      return  # one flag fetched from the device; the array itself only when it is bad
+    if not sync or x.size == 0 or not jnp.issubdtype(x.dtype, jnp.inexact) or bool(
+        all_finite(x)):
+      return
   values = np.asarray(x)
   if not np.issubdtype(values.dtype, np.floating) and not np.issubdtype(values.dtype,
                                                                         np.complexfloating):

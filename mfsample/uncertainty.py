@@ -98,17 +98,18 @@ def uncertainty_of_samples(gaussians_m, camera: Camera, *, settings: RenderSetti
                      stats=stats)
 
 
-def check_z(model, z):
+def check_z(model, z, sync=False):
   """Checks z for U: shape [M >= 1, *z_shape(model)] always (M = 0 would be a mean over no
-  samples, NaN); finite when concrete (a NaN row makes every Gaussian of that sample
-  non-finite, the renderer culls them and U comes out finite and wrong)."""
+  samples, NaN); finite when on the host, or a JAX array with `sync` (a NaN row makes every
+  Gaussian of that sample non-finite, the renderer culls them and U would come out finite
+  and wrong: the jitted functions make it NaN instead)."""
   want = samplers.z_shape(model)
   got = tuple(np.shape(z))
   if len(got) != 1 + len(want) or got[1:] != want or got[0] < 1:
     raise ValueError(f"z must have shape [M >= 1, {', '.join(map(str, want))}] (M samples for "
                      f"the {model.spec.kind} sampler, e.g. uncertainty_z(model, 2)), got "
                      f"{list(got)}")
-  arg_checks.check_finite("z", z, axis_name="sample")
+  arg_checks.check_finite("z", z, axis_name="sample", sync=sync)
 
 
 def check_background(background, channels=3):
@@ -136,8 +137,8 @@ def uncertainty(model, camera: Camera, z, *, settings: RenderSettings = RenderSe
     num_devices: devices to split the M samples over (static).
 
   Returns:
-    `Uncertainty`; U and the map are NaN when z holds a non-finite value under `jit` (a
-    concrete one raises `ValueError` naming the sample).
+    `Uncertainty`; U and the map are NaN when z holds a non-finite value (a numpy z raises
+    `ValueError` naming the sample instead).
   """
   check_z(model, z)
   check_background(background)

@@ -182,7 +182,7 @@ class _Overflow(NamedTuple):
 
 def _check_common(model, z, background, num_devices, max_budget):
   """(background [3], number of devices) after checking the arguments both optimisers take."""
-  check_z(model, z)
+  check_z(model, z, sync=True)  # called once, it syncs anyway
   check_background(background)
   arg_checks.check_int("max_budget", max_budget, minimum=1)
   dtype = model.params.mean["means"].dtype
