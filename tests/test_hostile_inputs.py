@@ -874,7 +874,7 @@ PLANNING_BAD = [  # (field, value, message fragment)
     ("max_views", 9, "config.max_views = 9 must be <= config.data.num_candidates = 8"),
     ("initial_view", 8, "config.initial_view = 8 must be < config.data.num_candidates = 8"),
     ("paired_references", ("farthest", "nope"), "'nope' is not one of"),
-    ("data.kind", "colmap", "config.data.kind = 'colmap'"),
+    ("data.kind", "colmapp", "config.data.kind = 'colmapp'"),
     ("data.num_candidates", 0, "config.data.num_candidates = 0"),
     ("data.synthetic.v_range", (0.6, 0.1), "strictly increasing"),
     ("data.synthetic.distance", 0.4, r"config.data.synthetic.distance = 0.4: must be a finite "
