@@ -1147,7 +1147,7 @@ def _blender(tmp_path, meta_changes=None, frame_changes=None):
     ({"camera_angle_x": None, "fl_y": 50.0}, {}, r"a vertical focal length \('fl_y' or "
                                                  r"'camera_angle_y'\) without a horizontal one"),
     ({"camera_angle_y": 4.0}, {}, r"'camera_angle_y' = 4.0 is not in \(0, pi\) radians"),
-    ({}, {"name": 3}, "the frame's 'name' must be a non-empty string, got 3"),
+    ({}, {"name": 3}, "frame 0: 'name' must be a non-empty string, got 3"),
 ])
 def test_blender_json_field_table(tmp_path, meta, frame, message):
   root = _blender(tmp_path, meta, frame)

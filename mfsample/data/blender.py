@@ -31,6 +31,7 @@ from mfsample.data.views import Views
 # OpenGL / Blender camera axes -> OpenCV camera axes (flip y and z).
 GL_TO_CV = np.diag([1.0, -1.0, -1.0, 1.0])
 
+
 def available_splits(path):
   """Names `s` of the `transforms_{s}.json` files in a dataset folder, sorted."""
   root = Path(path)
@@ -81,7 +82,7 @@ def load_blender(path, split, *, downscale=1, background=(1.0, 1.0, 1.0)) -> Vie
   for index, frame in enumerate(frames):
     where = f"{json_path} frame {index}"
     image_path = _image_path(root, frame, where)
-    name = _frame_name(frame, root, image_path)
+    name = _frame_name(frame, root, image_path, where)
     for key, what in ((image_path.resolve(), f"the image {image_path}"),
                       (("name", name), f"the view name {name!r}")):
       if key in seen:
@@ -182,12 +183,12 @@ def _image_path(root, frame, where):
   return _io.require_file(path, f"image of {where}")
 
 
-def _frame_name(frame, root, image_path):
+def _frame_name(frame, root, image_path, where):
   """The frame's `name`, else its image path relative to the dataset folder (the absolute
   path for an image outside it) without the suffix."""
   if "name" in frame:
     if not isinstance(frame["name"], str) or not frame["name"]:
-      raise _io.DatasetError(f"{image_path}: the frame's 'name' must be a non-empty string, got "
+      raise _io.DatasetError(f"{where}: 'name' must be a non-empty string, got "
                              f"{frame['name']!r}.")
     return frame["name"]
   try:
