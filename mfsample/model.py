@@ -27,6 +27,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from mfsample import arg_checks
 from mfsample._pytree import pytree_dataclass, replace, static_field
 from mfsample.gaussians import Gaussians
 
@@ -78,11 +79,11 @@ class SamplerSpec:
   def __post_init__(self):
     if self.kind not in SAMPLER_KINDS:
       raise ValueError(f"sampler kind must be one of {SAMPLER_KINDS}, got {self.kind!r}")
-    if self.kind in ("lowrank", "block") and self.rank < 1:
-      raise ValueError(f"rank must be >= 1 for the {self.kind} sampler, got {self.rank}")
-    unknown = set(self.groups) - set(GROUP_ORDER)
-    if unknown:
-      raise ValueError(f"unknown stochastic groups {sorted(unknown)}; known: {GROUP_ORDER}")
+    if isinstance(self.rank, bool) or not isinstance(self.rank, (int, np.integer)) or (
+        self.rank < 1):
+      raise ValueError(f"SamplerSpec.rank must be an integer >= 1 (k, columns of B_hat), got "
+                       f"{self.rank!r}")
+    _check_spec_groups(self)
     missing = set(self.groups) - {g for g, _ in self.bounds}
     if self.kind != "deterministic" and missing:
       raise ValueError(f"no bound given for stochastic groups {sorted(missing)}")
@@ -98,6 +99,36 @@ class SamplerSpec:
 
   def bound(self, group):
     return dict(self.bounds)[group]
+
+
+def _check_spec_groups(spec):
+  """Groups: known and distinct; bounds: (known group, finite number > 0) pairs, one per group.
+  A bound of 0, a negative one or NaN would clamp B_hat to 0 (or NaN) after the first step:
+  a model trained silently into a deterministic one."""
+  for name in ("groups", "bounds"):
+    if not isinstance(getattr(spec, name), tuple):
+      raise ValueError(f"SamplerSpec.{name} must be a tuple (the spec is a static, hashable "
+                       f"jit argument), got {type(getattr(spec, name)).__name__}")
+  unknown = set(spec.groups) - set(GROUP_ORDER)
+  if unknown:
+    raise ValueError(f"unknown stochastic groups {sorted(unknown)}; known: {GROUP_ORDER}")
+  if len(set(spec.groups)) != len(spec.groups):
+    raise ValueError(f"SamplerSpec.groups repeats a group: {spec.groups}")
+  seen = set()
+  for item in spec.bounds:
+    if not isinstance(item, tuple) or len(item) != 2:
+      raise ValueError(f"SamplerSpec.bounds must hold (group, bound) pairs, got {item!r}")
+    group, bound = item
+    if group not in GROUP_ORDER:
+      raise ValueError(f"SamplerSpec.bounds names an unknown group {group!r}; known: "
+                       f"{GROUP_ORDER}")
+    if group in seen:
+      raise ValueError(f"SamplerSpec.bounds gives two bounds for {group!r}")
+    seen.add(group)
+    ok = isinstance(bound, (int, float, np.integer, np.floating)) and not isinstance(bound, bool)
+    if not ok or not np.isfinite(bound) or bound <= 0:
+      raise ValueError(f"SamplerSpec.bounds[{group!r}] must be a finite number > 0 (the "
+                       f"upper bound of |B_hat|), got {bound!r}")
 
 
 class Params(NamedTuple):
@@ -244,6 +275,7 @@ def host_rng(key):
   Construction and densification run on the host with numpy: they have a new shape at
   every call, and eager JAX random ops would compile for each of them.
   """
+  arg_checks.check_key(key)
   data = np.asarray(jax.random.key_data(key) if jnp.issubdtype(key.dtype, jax.dtypes.prng_key)
                     else key, np.uint32)
   return np.random.default_rng(data.ravel().tolist())
@@ -307,34 +339,18 @@ def init_model(key, points, *, spec, sh_degree, init_scales, capacity=None,
   Returns:
     `Model` with the first N rows live and `sh_degree` (active) 0.
   """
-  points = np.asarray(points, np.float64)
-  if points.ndim != 2 or points.shape[1] != 3 or len(points) < 1:
-    raise ValueError(f"points must have shape [N >= 1, 3], got {points.shape}")
-  _check_finite_rows("points", points)
+  points, capacity = check_initial(points, capacity, init_opacity)
   n = len(points)
-  capacity = capacity_bucket(n) if capacity is None else int(capacity)
-  if capacity < n:
-    raise ValueError(f"capacity {capacity} < number of points {n}")
   if isinstance(sh_degree, bool) or not isinstance(sh_degree, (int, np.integer)) or not (
       0 <= sh_degree <= 3):
     raise ValueError(f"sh_degree must be an integer in 0..3, got {sh_degree!r}")
-  if not 0.0 < float(init_opacity) < 1.0:  # its logit must be finite
-    raise ValueError(f"init_opacity must be in (0, 1), got {init_opacity!r}")
   shapes = group_shapes(sh_degree)
-  if spec.stochastic:
-    for g in sorted(set(spec.groups) & set(shapes), key=GROUPS.index):
-      scale = init_scales.get(g) if hasattr(init_scales, "get") else None
-      if scale is None or not np.isfinite(scale) or scale < 0:
-        raise ValueError(f"init_scales[{g!r}] must be a finite number >= 0 (stochastic group), "
-                         f"got {scale!r}")
+  check_init_scales(init_scales, spec, shapes)
   rng = host_rng(key)
   if colors is None:
     sh_dc = rng.random((n, 3)) / 255.0
   else:
-    colors = np.asarray(colors, np.float64)
-    if colors.shape != (n, 3):
-      raise ValueError(f"colors must have shape [N={n}, 3], got {colors.shape}")
-    _check_finite_rows("colors", colors)
+    colors = _check_colors(colors, n)
     sh_dc = (colors - 0.5) / 0.28209479177387814  # rgb_to_sh_dc
   quats = np.zeros((n, 4))
   quats[:, 0] = 1.0
@@ -388,9 +404,13 @@ def model_from_mean(key, mean, *, spec, init_scales, capacity=None):
                        f"{list(np.shape(mean[g]))}")
   if n < 1:
     raise ValueError("mean holds no Gaussians")
-  capacity = capacity_bucket(n) if capacity is None else int(capacity)
+  for g in shapes:
+    _check_finite_rows(f"mean[{g!r}]", np.asarray(mean[g], np.float64).reshape(n, -1))
+  capacity = capacity_bucket(n) if capacity is None else arg_checks.check_int(
+      "capacity", capacity, minimum=1)
   if capacity < n:
     raise ValueError(f"capacity {capacity} < number of Gaussians {n}")
+  check_init_scales(init_scales, spec, shapes)
   pad = padding_values(shapes, capacity - n)
   params = {g: jnp.asarray(_pad(np.asarray(v, np.float32), capacity, pad[g]))
             for g, v in mean.items()}
@@ -400,6 +420,56 @@ def model_from_mean(key, mean, *, spec, init_scales, capacity=None):
   signs = {g: jnp.asarray(_pad(v, capacity, zeros(v))) for g, v in signs.items()}
   mask = jnp.asarray(np.arange(capacity) < n)
   return Model(Params(params, spread), signs, mask, jnp.asarray(sh_degree, jnp.int32), spec)
+
+
+def check_initial(points, capacity, init_opacity):
+  """(points [N, 3] float64, capacity C >= N) after checking the arguments that `init_model`
+  and `mfsample.lighting.init_relightable` share; ValueError naming the argument (and row)."""
+  arg_checks.check_real_dtype("points", points)
+  points = np.asarray(points, np.float64)
+  if points.ndim != 2 or points.shape[1] != 3 or len(points) < 1:
+    raise ValueError(f"points must have shape [N >= 1, 3], got {points.shape}")
+  _check_finite_rows("points", points)
+  n = len(points)
+  if capacity is None:
+    capacity = capacity_bucket(n)
+  capacity = arg_checks.check_int("capacity", capacity, minimum=1)
+  if capacity < n:
+    raise ValueError(f"capacity {capacity} < number of points {n}")
+  arg_checks.check_float("init_opacity", init_opacity, above=0.0, below=1.0)  # a finite logit
+  return points, capacity
+
+
+def check_init_scales(init_scales, spec, shapes):
+  """ValueError unless `init_scales` gives a finite number >= 0 for every stochastic group."""
+  if not spec.stochastic:
+    return
+  for g in sorted(set(spec.groups) & set(shapes), key=GROUP_ORDER.index):
+    scale = init_scales.get(g) if hasattr(init_scales, "get") else None
+    ok = isinstance(scale, (int, float, np.integer, np.floating)) and not isinstance(scale, bool)
+    if not ok or not np.isfinite(scale) or scale < 0:
+      raise ValueError(f"init_scales[{g!r}] must be a finite number >= 0 (stochastic group), "
+                       f"got {scale!r}")
+
+
+def _check_colors(colors, n):
+  """[N, 3] float64 RGB in [0, 1]. Integer colours (uint8 0..255) are refused rather than
+  guessed: read as [0, 1] values they would become SH coefficients in the hundreds."""
+  arg_checks.check_real_dtype("colors", colors)
+  dtype = np.asarray(colors).dtype
+  if not np.issubdtype(dtype, np.floating):
+    raise ValueError(f"colors must be floats in [0, 1], got dtype {dtype} (for 8-bit colours "
+                     "pass colors / 255)")
+  colors = np.asarray(colors, np.float64)
+  if colors.shape != (n, 3):
+    raise ValueError(f"colors must have shape [N={n}, 3], got {colors.shape}")
+  _check_finite_rows("colors", colors)
+  outside = np.any((colors < 0.0) | (colors > 1.0), axis=-1)
+  if np.any(outside):
+    i = int(np.argmax(outside))
+    raise ValueError(f"colors[{i}] = {colors[i].tolist()} is outside [0, 1] "
+                     f"({int(outside.sum())} row(s))")
+  return colors
 
 
 def _check_finite_rows(name, x):

@@ -27,6 +27,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from mfsample import arg_checks
 from mfsample.model import GROUP_ORDER, Model, activate, generator
 
 # Dimensions of scipy's Sobol direction numbers (Joe and Kuo).
@@ -126,6 +127,7 @@ def sobol_z(num, dim, seed, offset=0):
   for name, value, low in (("num", num, 0), ("dim", dim, 0), ("offset", offset, 0)):
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
       raise ValueError(f"sobol_z: {name} must be an integer >= {low}, got {value!r}")
+  arg_checks.check_seed("sobol_z: seed", seed)
   if dim > _SOBOL_MAX_DIM:
     raise ValueError(f"sobol_z: dim = {dim} exceeds the {_SOBOL_MAX_DIM} dimensions of the "
                      "Sobol direction numbers (use draw_z's uniforms instead)")
@@ -159,5 +161,7 @@ def draw_z(model: Model, num, key, sobol_rows=None):
   shape = (num,) + z_shape(model)
   dtype = model.params.mean["means"].dtype
   if model.spec.kind == "lowrank" and sobol_rows is not None:
+    arg_checks.check_shape("draw_z: sobol_rows", sobol_rows, shape, "rows of sobol_z")
     return jnp.asarray(sobol_rows, dtype).reshape(shape)
+  arg_checks.check_key(key, "draw_z: key")
   return jax.random.uniform(key, shape, dtype, minval=-1.0, maxval=1.0)

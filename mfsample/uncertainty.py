@@ -24,7 +24,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from mfsample import samplers
+from mfsample import arg_checks, samplers
 from mfsample.camera import Camera
 from mfsample.renderer import TileStats, render
 from mfsample.renderer.budget import render_with_budget
@@ -50,6 +50,8 @@ class Uncertainty(NamedTuple):
 
 def pixel_variance(rgbs):
   """[M, H, W, C] renders -> [H, W]: (1/M) sum_m ||C_m - C_mean||^2 per pixel (Eq. 10)."""
+  if np.ndim(rgbs) != 4 or np.shape(rgbs)[0] < 1:  # M = 0 would be a mean over nothing: NaN
+    raise ValueError(f"rgbs must have shape [M >= 1, H, W, C], got {list(np.shape(rgbs))}")
   mean = jnp.mean(rgbs, axis=0, keepdims=True)
   return jnp.mean(jnp.sum(jnp.square(rgbs - mean), axis=-1), axis=0)
 
@@ -71,6 +73,7 @@ def uncertainty_z(model, num_samples, seed=0):
       num_samples < 1):
     raise ValueError(f"num_samples must be an integer >= 1 (M; U needs M >= 2 to be "
                      f"non-zero), got {num_samples!r}")
+  arg_checks.check_seed("seed", seed)
   rows = None
   if model.spec.kind == "lowrank" and model.spec.stochastic:
     rows = samplers.sobol_z(num_samples, model.spec.rank, seed)
@@ -95,7 +98,28 @@ def uncertainty_of_samples(gaussians_m, camera: Camera, *, settings: RenderSetti
                      stats=stats)
 
 
-@functools.partial(jax.jit, static_argnames=("settings", "num_devices"))
+def check_z(model, z, sync=False):
+  """Checks z for U: shape [M >= 1, *z_shape(model)] always (M = 0 would be a mean over no
+  samples, NaN); finite when on the host, or a JAX array with `sync` (a NaN row makes every
+  Gaussian of that sample non-finite, the renderer culls them and U would come out finite
+  and wrong: the jitted functions make it NaN instead)."""
+  want = samplers.z_shape(model)
+  got = tuple(np.shape(z))
+  if len(got) != 1 + len(want) or got[1:] != want or got[0] < 1:
+    raise ValueError(f"z must have shape [M >= 1, {', '.join(map(str, want))}] (M samples for "
+                     f"the {model.spec.kind} sampler, e.g. uncertainty_z(model, 2)), got "
+                     f"{list(got)}")
+  arg_checks.check_finite("z", z, axis_name="sample", sync=sync)
+
+
+def check_background(background, channels=3):
+  """A concrete background must be [channels] finite numbers (traced ones: shape only)."""
+  if background is None:
+    return
+  arg_checks.check_shape("background", background, (channels,), "one colour")
+  arg_checks.check_finite("background", background)
+
+
 def uncertainty(model, camera: Camera, z, *, settings: RenderSettings = RenderSettings(),
                 background=None, num_devices=1) -> Uncertainty:
   """U of a stochastic model seen from one camera (Eq. 10), and its per-pixel map.
@@ -113,12 +137,26 @@ def uncertainty(model, camera: Camera, z, *, settings: RenderSettings = RenderSe
     num_devices: devices to split the M samples over (static).
 
   Returns:
-    `Uncertainty`.
+    `Uncertainty`; U and the map are NaN when z holds a non-finite value (a numpy z raises
+    `ValueError` naming the sample instead).
   """
+  check_z(model, z)
+  check_background(background)
+  num_devices = arg_checks.check_int("num_devices", num_devices, minimum=1,
+                                     maximum=jax.device_count())
+  return _uncertainty(model, camera, z, settings=settings, background=background,
+                      num_devices=num_devices)
+
+
+@functools.partial(jax.jit, static_argnames=("settings", "num_devices"))
+def _uncertainty(model, camera, z, *, settings, background, num_devices):
   if background is None:
     background = jnp.zeros((3,), model.params.mean["means"].dtype)
-  return uncertainty_of_samples(sample_gaussians(model, z), camera, settings=settings,
-                                background=background, num_devices=num_devices)
+  u = uncertainty_of_samples(sample_gaussians(model, z), camera, settings=settings,
+                             background=background, num_devices=num_devices)
+  ok = arg_checks.all_finite(z)
+  return u._replace(value=arg_checks.nan_unless(ok, u.value),
+                    pixel_map=arg_checks.nan_unless(ok, u.pixel_map))
 
 
 # ------------------------------------------------------------------ batches of cameras
@@ -149,6 +187,9 @@ def _score(model, cameras, z, background, *, settings, chunk_size, num_devices, 
 
   values, maps, stats = map_cameras(one, cameras, gaussians_m, chunk_size=chunk_size,
                                     num_devices=num_devices)
+  ok = arg_checks.all_finite(z)  # (traced z cannot raise: NaN scores, never finite ones)
+  values = arg_checks.nan_unless(ok, values)
+  maps = None if maps is None else arg_checks.nan_unless(ok, maps)
   return CameraScores(values, maps, stats)
 
 
@@ -177,11 +218,17 @@ def score_cameras(model, cameras: Camera, z, *, settings: RenderSettings, backgr
     raise ValueError("score_cameras takes a Camera batched over one axis [B], got "
                      + (f"batch shape {cameras.batch_shape}" if isinstance(cameras, Camera)
                         else type(cameras).__name__))
+  check_z(model, z)
+  check_background(background)
+  chunk_size = arg_checks.check_int("chunk_size", chunk_size, minimum=1)
+  max_budget = arg_checks.check_int("max_budget", max_budget, minimum=1)
   if background is None:
     background = jnp.zeros((3,), model.params.mean["means"].dtype)
   background = jnp.asarray(background, model.params.mean["means"].dtype)
   if num_devices is None:
     num_devices = default_num_devices(cameras.batch_shape[0])
+  num_devices = arg_checks.check_int("num_devices", num_devices, minimum=1,
+                                     maximum=jax.device_count())
   return render_with_budget(_score, settings, model, cameras, z, background,
                             chunk_size=chunk_size, num_devices=num_devices,
                             with_maps=with_maps, max_budget=max_budget, what="scoring")

@@ -210,7 +210,7 @@ def test_errors_name_what_is_missing(tmp_path, capture):
   with pytest.raises(DatasetError, match=r"00001_frame_1.png: image is 64x40 but"):
     load_colmap(broken)
   (broken / "sparse" / "0" / "images.bin").write_bytes(b"\x05\x00\x00")
-  with pytest.raises(DatasetError, match="cannot read the COLMAP model"):
+  with pytest.raises(DatasetError, match=r"images.bin: truncated: the number of images"):
     load_colmap(broken)
   with pytest.raises(FileExistsError):
     export_colmap(root, load_colmap(root)[0])

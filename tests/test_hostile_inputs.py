@@ -25,17 +25,36 @@ from planning_testlib import random_model
 from test_train import resume_config
 
 from configs import camera_planning
-from mfsample import _json, config_checks, jobs, samplers
+from mfsample import _json, config_checks, jobs, metrics, samplers
 from mfsample import uncertainty as unc
 from mfsample._pytree import replace
 from mfsample.camera import Camera, InvalidCameraError
 from mfsample.config_checks import ConfigError
-from mfsample.data import DatasetError, load_blender, load_llff, poses_bounds_from_cameras
-from mfsample.data._io import read_image
-from mfsample.model import GROUPS, SamplerSpec, init_model
-from mfsample.planning import runner, tables
+from mfsample.data import (
+  DatasetError,
+  PointCloud,
+  Views,
+  export_blender,
+  export_colmap,
+  load_blender,
+  load_colmap,
+  load_llff,
+  load_ply,
+  poses_bounds_from_cameras,
+)
+from mfsample.data._io import read_image, read_json
+from mfsample.lighting import captures, lights
+from mfsample.lighting import field as light_field
+from mfsample.lighting import optimize as light_optimize
+from mfsample.lighting import uncertainty as lu
+from mfsample.lighting.field import init_relightable
+from mfsample.model import GROUPS, SamplerSpec, init_model, model_from_mean
+from mfsample.next_views import sphere_candidates, top_k
+from mfsample.planning import optimize as view_optimize
+from mfsample.planning import poses, runner, tables
 from mfsample.planning.config import validate as validate_planning
 from mfsample.renderer import RenderSettings, render
+from mfsample.renderer.budget import render_with_budget
 from mfsample.scenes import cache
 from mfsample.testing import orbit_camera, random_gaussians
 from mfsample.train import checkpoint as ckpt
@@ -109,6 +128,16 @@ def test_camera_errors_name_the_batch_index():
      "not rigid"),
     (lambda: Camera.from_blender(np.eye(4), "wide", 8, 8), ValueError,
      "camera_angle_x = 'wide' must be a number"),
+    (lambda: Camera.look_at(np.zeros((2, 3)) + 3, np.zeros((3, 3)), np.array([0, 0, 1.0]), 0.8,
+                            8, 8), ValueError, r"batch shapes of eye \[2, 3\], target \[3, 3\]"),
+    (lambda: Camera.look_at(np.array([3.0, 0]), np.zeros(3), np.array([0, 0, 1.0]), 0.8, 8, 8),
+     ValueError, r"eye must have shape \[\.\.\., 3\], got \[2\]"),
+    (lambda: Camera.look_at(np.array([3.0, 0, 1]), np.zeros(3), np.array([0, NAN, 1.0]), 0.8,
+                            8, 8), InvalidCameraError, r"up = \[0.0, nan, 1.0\] is not finite"),
+    (lambda: Camera.look_at(np.array([3.0, 0, 1]), np.zeros(3), np.zeros(3), 0.8, 8, 8),
+     InvalidCameraError, "up is a zero vector"),
+    (lambda: Camera.from_blender(np.eye(4)[:, :3], 0.8, 8, 8), ValueError,
+     r"c2w must have shape \[\.\.\., 4, 4\] or \[\.\.\., 3, 4\], got \[4, 3\]"),
 ])
 def test_camera_constructor_table(call, error, message):
   with pytest.raises(error, match=message):
@@ -178,6 +207,18 @@ def test_render_gives_nan_images_for_invalid_cameras():
      "mask must be boolean"),
     (lambda g, c: render(replace(g, opacities=jnp.ones(4, jnp.int32)), c), ValueError,
      "opacities must be floating"),
+    (lambda g, c: render(g, c, background=jnp.ones(4)), ValueError,
+     r"background must have shape \[3\] .*RGB colour\), got \[4\]"),
+    (lambda g, c: render(g, c, features=jnp.ones((4, 2)), background=jnp.ones(3)), ValueError,
+     r"background must have shape \[2\] \(one value per channel of features\)"),
+    (lambda g, c: render(g, c, screen_offset=jnp.zeros((4, 3))), ValueError,
+     r"screen_offset must have shape \[N=4, 2\], got \[4, 3\]"),
+    (lambda g, c: RenderSettings(radius_sigma=NAN), ValueError,
+     "RenderSettings.radius_sigma must be a finite number, got nan"),
+    (lambda g, c: RenderSettings(tile_size=2.5), ValueError,
+     "RenderSettings.tile_size must be an integer, got 2.5"),
+    (lambda g, c: render_with_budget(render, SMALL, g, c, max_budget=0), ValueError,
+     "max_budget must be an integer >= 1, got 0"),
 ])
 def test_render_input_table(call, error, message):
   g = random_gaussians(4, sh_degree=0, seed=0)
@@ -198,24 +239,75 @@ POINTS = np.random.default_rng(0).uniform(-1, 1, (5, 3))
     ({"points": np.where(np.arange(5)[:, None] == 3, NAN, POINTS)}, r"points\[3\] is not finite"),
     ({"capacity": 3}, "capacity 3 < number of points 5"),
     ({"sh_degree": 4}, "sh_degree must be an integer in 0..3"),
-    ({"init_opacity": 1.0}, r"init_opacity must be in \(0, 1\)"),
-    ({"init_opacity": 0.0}, r"init_opacity must be in \(0, 1\)"),
+    ({"init_opacity": 1.0}, r"init_opacity must be a finite number in \(0.0, 1.0\), got 1.0"),
+    ({"init_opacity": 0.0}, r"init_opacity must be a finite number in \(0.0, 1.0\), got 0.0"),
     ({"colors": np.ones((4, 3))}, r"colors must have shape \[N=5, 3\]"),
     ({"colors": np.full((5, 3), np.inf)}, r"colors\[0\] is not finite"),
     ({"init_scales": {"means": 1e-3}}, r"init_scales\['log_scales'\] must be a finite number"),
     ({"init_scales": {**SCALES, "quats": -1.0}}, r"init_scales\['quats'\]"),
+    ({"colors": np.full((5, 3), 128, np.uint8)}, r"colors must be floats in \[0, 1\], got "
+                                                 r"dtype uint8 \(for 8-bit colours pass "
+                                                 r"colors / 255\)"),
+    ({"colors": np.full((5, 3), 1.5)}, r"colors\[0\] = \[1.5, 1.5, 1.5\] is outside \[0, 1\]"),
+    ({"points": np.full((5, 3), "1")}, "points must hold real numbers"),
+    ({"capacity": 7.5}, "capacity must be an integer >= 1, got 7.5"),
+    ({"init_opacity": NAN}, r"init_opacity must be a finite number in \(0.0, 1.0\), got nan"),
+    ({"key": 0}, r"key must be one JAX PRNG key .*, got 0"),
+    ({"key": jnp.zeros(3, jnp.uint32)}, r"key must be one JAX PRNG key .*shape \[3\]"),
 ])
 def test_init_model_table(changes, message):
-  kwargs = {"points": POINTS, "spec": SPEC, "sh_degree": 1, "init_scales": SCALES, **changes}
+  kwargs = {"key": jax.random.PRNGKey(0), "points": POINTS, "spec": SPEC, "sh_degree": 1,
+            "init_scales": SCALES, **changes}
   with pytest.raises(ValueError, match=message):
-    init_model(jax.random.PRNGKey(0), **kwargs)
+    init_model(**kwargs)
+
+
+RELIGHTABLE = SamplerSpec(kind="lowrank", rank=2, groups=("transfer_dc",),
+                          bounds=(("transfer_dc", 0.5),))
+
+
+@pytest.mark.parametrize("changes, message", [
+    ({"points": np.where(np.arange(5)[:, None] == 2, NAN, POINTS)}, r"points\[2\] is not finite"),
+    ({"init_opacity": 1.0}, r"init_opacity must be a finite number in \(0.0, 1.0\), got 1.0"),
+    ({"capacity": 3}, "capacity 3 < number of points 5"),
+    ({"init_scales": {"transfer_dc": NAN}}, r"init_scales\['transfer_dc'\] must be a finite"),
+    ({"key": 7}, "key must be one JAX PRNG key"),
+    ({"light_coeffs": 5}, r"light_coeffs \(n\) must be one of \(1, 4, 9, 16\)"),
+])
+def test_init_relightable_table(changes, message):
+  kwargs = {"key": jax.random.PRNGKey(0), "points": POINTS, "spec": RELIGHTABLE, "out_coeffs": 1,
+            "light_coeffs": 4, "init_scales": {"transfer_dc": 0.1}, **changes}
+  with pytest.raises(ValueError, match=message):
+    init_relightable(**kwargs)
+
+
+def test_model_from_a_mean_with_a_non_finite_row_is_refused():
+  mean = {"means": POINTS.astype(np.float32), "log_scales": np.zeros((5, 3), np.float32),
+          "quats": np.tile(np.float32([1, 0, 0, 0]), (5, 1)), "opacity_logits": np.zeros(5),
+          "sh_dc": np.zeros((5, 3), np.float32)}
+  mean["log_scales"][4, 1] = np.inf
+  with pytest.raises(ValueError, match=r"mean\['log_scales'\]\[4\] is not finite"):
+    model_from_mean(jax.random.PRNGKey(0), mean, spec=SPEC, init_scales=SCALES)
 
 
 @pytest.mark.parametrize("kwargs, message", [
     ({"kind": "gaussian"}, "sampler kind must be one of"),
-    ({"kind": "lowrank", "rank": 0}, "rank must be >= 1"),
+    ({"kind": "lowrank", "rank": 0}, "rank must be an integer >= 1"),
     ({"groups": ("means", "colour")}, "unknown stochastic groups"),
     ({"groups": ("means",), "bounds": ()}, "no bound given"),
+    # A bound of NaN, -1 or 0 would clamp B_hat to NaN or 0 after the first training step.
+    ({"groups": ("means",), "bounds": (("means", NAN),)},
+     r"SamplerSpec.bounds\['means'\] must be a finite number > 0 .*, got nan"),
+    ({"groups": ("means",), "bounds": (("means", -1.0),)}, r"bounds\['means'\] .*got -1.0"),
+    ({"groups": ("means",), "bounds": (("means", 0),)}, r"bounds\['means'\] .*got 0"),
+    ({"groups": ("means",), "bounds": (("means", True),)}, r"bounds\['means'\] .*got True"),
+    ({"rank": 2.5}, "SamplerSpec.rank must be an integer >= 1 .*, got 2.5"),
+    ({"kind": "diagonal", "rank": 0}, "SamplerSpec.rank must be an integer >= 1"),
+    ({"groups": ("means", "means"), "bounds": (("means", 1.0),)}, "repeats a group"),
+    ({"groups": ("means",), "bounds": (("means", 1.0), ("means", 2.0))}, "two bounds for"),
+    ({"groups": ("means",), "bounds": (("colour", 1.0),)}, "names an unknown group 'colour'"),
+    ({"groups": ["means"], "bounds": (("means", 1.0),)}, "SamplerSpec.groups must be a tuple"),
+    ({"groups": ("means",), "bounds": {"means": 1.0}}, "SamplerSpec.bounds must be a tuple"),
 ])
 def test_sampler_spec_table(kwargs, message):
   with pytest.raises(ValueError, match=message):
@@ -235,10 +327,96 @@ def test_sampler_spec_table(kwargs, message):
     (lambda m: unc.uncertainty_z(m, 0), "num_samples must be an integer >= 1"),
     (lambda m: unc.score_cameras(m, orbit_camera(8, 8), jnp.zeros((2, 2)), settings=SMALL),
      "batched over one axis"),
+    (lambda m: samplers.sobol_z(4, 2, -1), "sobol_z: seed must be an integer in"),
+    (lambda m: samplers.draw_z(m, 2, 0), "draw_z: key must be one JAX PRNG key"),
+    (lambda m: samplers.draw_z(m, 2, None, sobol_rows=np.zeros((3, 2))),
+     r"draw_z: sobol_rows must have shape \[2, 2\]"),
+    (lambda m: unc.uncertainty_z(m, 2, seed=-1), r"seed must be an integer in \[0, "),
+    (lambda m: unc.uncertainty_z(m, 2, seed=0.5), "seed must be an integer"),
+    (lambda m: unc.pixel_variance(jnp.zeros((0, 4, 4, 3))), r"rgbs must have shape \[M >= 1, "),
+    (lambda m: unc.score_cameras(m, _cams(), jnp.zeros((2, 2)), settings=SMALL, chunk_size=0),
+     "chunk_size must be an integer >= 1, got 0"),
+    (lambda m: unc.score_cameras(m, _cams(), jnp.zeros((2, 2)), settings=SMALL,
+                                 num_devices=64), r"num_devices must be an integer in \[1, "),
+    (lambda m: unc.score_cameras(m, _cams(), jnp.zeros((2, 2)), settings=SMALL, max_budget=0),
+     "max_budget must be an integer >= 1"),
+    (lambda m: unc.score_cameras(m, _cams(), jnp.zeros((2, 2)), settings=SMALL,
+                                 background=(1.0, 1.0)), r"background must have shape \[3\]"),
+    (lambda m: unc.uncertainty(m, orbit_camera(8, 8), jnp.zeros((2, 2)),
+                               background=np.array([0.0, NAN, 0.0])),
+     r"background\[1\] is not finite"),
+    (lambda m: unc.uncertainty(m, orbit_camera(8, 8), jnp.zeros((2, 2)), num_devices=0),
+     r"num_devices must be an integer in \[1, "),
 ])
 def test_sampler_and_uncertainty_table(call, message):
   with pytest.raises(ValueError, match=message):
     call(random_model("lowrank", num=8))
+
+
+def _cams(num=2):
+  """`num` valid 8 x 8 cameras batched over one axis."""
+  return Camera.create(np.stack([W2C] * num), 6.0, 6.0, 4.0, 4.0, 8, 8)
+
+
+Z_BAD = {  # z of M = 2 low-rank samples (k = 2) with one bad row, and z with no sample
+    "nan row": (np.array([[0.5, -0.5], [NAN, 0.1]], np.float32),
+                r"z\[1\] \(sample 1\) is not finite \(1 of 2 samples"),
+    "inf entry": (np.array([[0.5, np.inf], [0.3, 0.1]]), r"z\[0\] \(sample 0\) is not finite"),
+    "no sample": (np.zeros((0, 2), np.float32), r"z must have shape \[M >= 1, 2\] .*got \[0, 2\]"),
+    "wrong k": (np.zeros((2, 3), np.float32), r"z must have shape \[M >= 1, 2\] .*got \[2, 3\]"),
+}
+
+
+@pytest.mark.parametrize("case", Z_BAD)
+@pytest.mark.parametrize("entry", ["uncertainty", "score_cameras", "light_uncertainty",
+                                   "light_gram"])
+def test_z_without_samples_or_with_a_non_finite_one_is_refused(case, entry):
+  """A NaN row of z makes every Gaussian of its sample non-finite; the renderer culls them and
+  U would come out finite and wrong. M = 0 would be a mean over nothing (NaN)."""
+  z, message = Z_BAD[case]
+  calls = {
+      "uncertainty": lambda: unc.uncertainty(random_model("lowrank", num=8), orbit_camera(8, 8),
+                                             z, settings=SMALL),
+      "score_cameras": lambda: unc.score_cameras(random_model("lowrank", num=8), _cams(), z,
+                                                 settings=SMALL),
+      "light_uncertainty": lambda: lu.light_uncertainty(_relightable(), _cams(), z,
+                                                        lights.uniform_light(4), settings=SMALL),
+      "light_gram": lambda: lu.light_gram(_relightable(), _cams(), z, settings=SMALL),
+  }
+  with pytest.raises(ValueError, match=message):
+    calls[entry]()
+
+
+def _relightable():
+  """An untrained relightable model (m = 1, n = 4) whose samples differ (B_hat over T)."""
+  return init_relightable(jax.random.PRNGKey(0), POINTS * 0.3, spec=RELIGHTABLE, out_coeffs=1,
+                          light_coeffs=4, init_scales={"transfer_dc": 0.2}, init_opacity=0.6)
+
+
+def test_under_jit_a_non_finite_z_or_light_gives_nan_never_a_finite_u():
+  """Traced values cannot raise: U, its map and U(xi) are NaN (before: finite for a NaN row of
+  z, exactly 0 for a NaN light), and a finite input still gives a finite U > 0. A z on the
+  device is not fetched to be checked (no sync per call): it gives NaN too."""
+  model, relit, camera = random_model("lowrank", num=8), _relightable(), _cams(1)
+  u = jax.jit(lambda z: unc.uncertainty(model, camera[0], z, settings=SMALL))
+  good = np.array([[0.5, -0.5], [-0.4, 0.3]], np.float32)
+  assert float(u(good).value) > 0
+  bad = u(good * np.array([[1.0], [NAN]], np.float32))
+  assert np.isnan(float(bad.value)) and np.all(np.isnan(bad.pixel_map))
+  on_device = jnp.asarray(good * np.array([[1.0], [NAN]], np.float32))
+  assert np.isnan(float(unc.uncertainty(model, camera[0], on_device, settings=SMALL).value))
+  scores, _ = unc.score_cameras(model, _cams(), on_device, settings=SMALL, num_devices=1)
+  assert np.all(np.isnan(scores.values))
+  xi = lights.uniform_light(4)
+  u_light = jax.jit(lambda x: lu.light_uncertainty(relit, camera, good, x, settings=SMALL).value)
+  assert float(u_light(jnp.asarray(xi, jnp.float32))) > 0
+  assert np.isnan(float(u_light(jnp.asarray(xi * NAN, jnp.float32))))
+  relit_image = jax.jit(lambda x: light_field.render_relit(
+      relit.params.mean, relit.mask, x, camera[0], settings=SMALL).rgb)
+  assert np.all(np.isnan(relit_image(jnp.full(4, NAN))))
+  with pytest.raises(ValueError, match=r"xi has non-finite coefficients at \[0, 1, 2, 3\]"):
+    light_field.render_relit(relit.params.mean, relit.mask, np.full(4, NAN), camera[0],
+                             settings=SMALL)
 
 
 def test_scores_of_invalid_cameras_are_nan_and_leave_the_others_alone():
@@ -260,6 +438,124 @@ def test_one_sample_is_allowed_and_gives_zero_uncertainty():
   assert z.shape == (1, 2)
   rgbs = jnp.asarray(np.random.default_rng(0).uniform(size=(1, 4, 5, 3)), jnp.float32)
   assert not np.any(np.asarray(unc.pixel_variance(rgbs)))  # Eq. 10 with M = 1: exactly 0
+
+
+# ====================================================================== lights, Q, metrics, views
+
+
+@pytest.mark.parametrize("call, message", [
+    (lambda: lights.on_sphere(np.array([NAN, 1.0, 0.0, 0.0])), r"xi\[0\] is not finite"),
+    (lambda: lights.on_sphere(np.zeros(4)), "a zero light has no direction"),
+    (lambda: lights.on_sphere(np.ones(4), norm=0.0), "norm must be a finite number > 0.0"),
+    (lambda: lights.uniform_light(5), "an SH light has 1, 4, 9 or 16 coefficients, got 5"),
+    (lambda: lights.held_out_lights(4, num_environments=1, num_random=-1, seed=0),
+     "num_random must be an integer >= 0, got -1"),
+    (lambda: lights.held_out_lights(4, num_environments=0, num_random=0, seed=0),
+     "num_environments \\+ num_random >= 1"),
+    (lambda: lights.held_out_lights(4, num_environments=1, num_random=1, seed=0, power=0.0),
+     "power must be a finite number > 0.0"),
+    (lambda: lights.held_out_lights(4, num_environments=1, num_random=1, seed=-2),
+     "seed must be an integer in"),
+    (lambda: lu.top_eigen(np.full((4, 4), NAN)), r"q\[0, 0\] is not finite"),
+    (lambda: lu.top_eigen(np.ones((4, 3))), r"q must be a square \[n, n\] matrix, got shape "
+                                            r"\[4, 3\]"),
+    (lambda: lu.top_eigen(np.triu(np.ones((4, 4)))), r"q must be symmetric .*max \|Q - Q\^T\| = 1"),
+    (lambda: lu.quadratic_u(np.eye(4), np.ones((2, 3))), r"lights must have shape \[\.\.\., 4\]"),
+    (lambda: lu.quadratic_u(np.eye(4)[:3], np.ones(4)), "q must be a square"),
+    (lambda: captures.capture(np.zeros((2, 4, 8, 8)), np.ones(4)),
+     r"basis must have shape \[V, n, H, W, 3\]"),
+    (lambda: light_optimize.AscentSettings(steps=2.5), "AscentSettings.steps must be an integer"),
+    (lambda: light_optimize.AscentSettings(norm=NAN), "AscentSettings.norm must be a finite"),
+    (lambda: light_field.radiance(_relightable().params.mean, np.ones(3), np.zeros((5, 3))),
+     r"xi must be one SH light of 4 coefficients \(shape \[4\]\), got shape \[3\]"),
+    (lambda: lu.light_uncertainty(_relightable(), _cams()[0], np.zeros((2, 2), np.float32),
+                                  np.ones(4), settings=SMALL),
+     r"cameras must be a Camera batched over one axis \[B\], got batch shape \(\)"),
+])
+def test_light_argument_table(call, message):
+  with pytest.raises(ValueError, match=message):
+    call()
+
+
+IMAGE = np.random.default_rng(0).uniform(size=(12, 12, 3)).astype(np.float32)
+
+
+@pytest.mark.parametrize("call, message", [
+    (lambda: metrics.psnr(IMAGE, IMAGE[..., :1]),
+     r"psnr: images a and b must have the same shape, got \[12, 12, 3\] and \[12, 12, 1\]"),
+    (lambda: metrics.mse(IMAGE[None], IMAGE), "mse: images a and b must have the same shape"),
+    (lambda: metrics.ssim(IMAGE, IMAGE[:11]), "ssim: images a and b must have the same shape"),
+    (lambda: metrics.psnr(IMAGE, (IMAGE * 255).astype(np.uint8)),
+     "same kind of dtype, got float32 and uint8"),
+    (lambda: metrics.psnr(IMAGE[0], IMAGE[0]), r"must have shape \[\.\.\., H, W, C\]"),
+    (lambda: metrics.make_lpips("vgg"), "net must be one of"),
+])
+def test_metric_argument_table(call, message):
+  with pytest.raises(ValueError, match=message):
+    call()
+
+
+def test_integer_images_are_compared_in_floats_with_their_dtype_peak():
+  """uint8 arithmetic wraps (0 - 1 = 255) and a peak of 1 for 0..255 values gives about
+  -40 dB: integer images are compared as floats, with max_val = the dtype's maximum."""
+  a = np.zeros((4, 4, 3), np.uint8)
+  b = np.full((4, 4, 3), 255, np.uint8)
+  assert float(metrics.mse(a, b)) == 255.0 ** 2
+  assert float(metrics.mse(b, a)) == 255.0 ** 2  # not (0 - 255) mod 256
+  q = np.round(IMAGE * 255).astype(np.uint8)
+  noisy = np.clip(q.astype(int) + np.random.default_rng(1).integers(-3, 4, q.shape), 0,
+                  255).astype(np.uint8)
+  as_float = metrics.psnr(q / 255.0, noisy / 255.0)
+  np.testing.assert_allclose(float(metrics.psnr(q, noisy)), float(as_float), rtol=1e-5)
+  assert 30 < float(metrics.psnr(q, noisy)) < 60
+  np.testing.assert_allclose(float(metrics.ssim(q, noisy)),
+                             float(metrics.ssim(q / 255.0, noisy / 255.0)), rtol=1e-5)
+  # An explicit peak is taken as given.
+  np.testing.assert_allclose(float(metrics.psnr(q, noisy, max_val=1.0)),
+                             float(metrics.psnr(q, noisy)) - 20 * np.log10(255), rtol=1e-5)
+
+
+@pytest.mark.parametrize("call, message", [
+    (lambda: poses.SphereSpec(radius=NAN), "SphereSpec.radius must be a finite number > 0.0"),
+    (lambda: poses.SphereSpec(center=(0.0, 0.0)), "SphereSpec.center must be 3 numbers"),
+    (lambda: poses.SphereSpec(fov_x=40.0), r"SphereSpec.fov_x must be a finite number in "
+                                           r"\(0.0, 3.14"),
+    (lambda: poses.SphereSpec(width=0), "SphereSpec.width must be an integer >= 1"),
+    (lambda: poses.spherical_camera(jnp.zeros(3), poses.SphereSpec()),
+     r"uv must have shape \[\.\.\., 2\], got \[3\]"),
+    (lambda: poses.perturb_camera(_cams(1)[0], jnp.zeros(5)),
+     r"xi must have shape \[6\] \(one tangent vector per camera\), got \[5\]"),
+    (lambda: poses.perturb_camera(_cams(2), jnp.zeros(6)), r"xi must have shape \[2, 6\]"),
+    (lambda: poses.se3_exp(jnp.zeros((2, 5))), r"xi must have shape \[\.\.\., 6\]"),
+    (lambda: poses.camera_to_uv(_cams(2), center=(0.0, NAN, 0.0)), r"center\[1\] is not finite"),
+    (lambda: view_optimize.OptimizeSettings(steps=2.5), "OptimizeSettings.steps must be an "
+                                                        "integer >= 1, got 2.5"),
+    (lambda: view_optimize.OptimizeSettings(lr=NAN), "OptimizeSettings.lr must be a finite"),
+    (lambda: view_optimize.OptimizeSettings(resample_z="yes"), "resample_z must be True or False"),
+    (lambda: view_optimize.optimize_spherical(random_model("lowrank", num=8), [NAN, 0.3],
+                                              np.zeros((2, 2), np.float32),
+                                              sphere=poses.SphereSpec()),
+     r"uv0\[0\] is not finite"),
+    (lambda: view_optimize.optimize_se3(random_model("lowrank", num=8), _cams(2),
+                                        np.zeros((2, 2), np.float32)),
+     "camera0 must be one unbatched"),
+    (lambda: view_optimize.optimize_se3(random_model("lowrank", num=8), _cams(1)[0],
+                                        np.full((2, 2), NAN, np.float32)),
+     r"z\[0\] \(sample 0\) is not finite"),
+    (lambda: top_k([0.3, 0.1], -1), "k must be an integer >= 0, got -1"),
+    (lambda: top_k([0.3, NAN, 0.2], 1), r"values\[1\] is NaN \(1 of 3\)"),
+    (lambda: top_k(np.zeros((2, 2)), 1), r"values must have shape \[B\], got \[2, 2\]"),
+    (lambda: sphere_candidates(_cams(2), (0.0, 0.0, NAN), 4), r"center\[2\] is not finite"),
+    (lambda: sphere_candidates(_cams(2), (0.0, 0.0, 0.0), 0), "num must be an integer >= 1"),
+])
+def test_planning_and_next_view_argument_table(call, message):
+  with pytest.raises(ValueError, match=message):
+    call()
+
+
+def test_top_k_beyond_the_count_returns_all_in_order():
+  np.testing.assert_array_equal(top_k([0.1, 0.4, 0.2], 5), [1, 2, 0])
+  assert top_k([0.1, 0.4], 0).size == 0
 
 
 # ====================================================================== training configs
@@ -327,6 +623,23 @@ def test_config_dicts_refuse_another_type_on_assignment(field, value):
   config = tiny_config("lowrank")  # (and so does the command line: --config.train.num_steps)
   with pytest.raises(TypeError, match=f"Could not override field '{field.split('.')[-1]}'"):
     _set(config, field, value)
+
+
+@pytest.mark.parametrize("override, error, message", [
+    ("--config.train.nonexistent=3", AttributeError, "'nonexistent'"),
+    ("--config.trian.num_steps=3", KeyError, "Did you mean \"train\" instead of \"trian\""),
+])
+def test_unknown_fields_on_the_command_line_are_refused_by_name(override, error, message):
+  """ml_collections refuses a field the config lacks while absl parses the command line,
+  before an experiment's main (and its validation) runs, naming the field; a close match is
+  suggested."""
+  config_file = os.path.join(os.path.dirname(__file__), "..", "configs", "train.py")
+  argv = ["prog", f"--config={config_file}:tiny", override]
+  fv = flags.FlagValues()
+  config_flags.DEFINE_config_file("config", None, "", flag_values=fv, lock_config=True,
+                                  sys_argv=argv)
+  with pytest.raises(error, match=message):
+    fv(argv)
 
 
 def test_train_refuses_a_bad_config_before_any_step(tiny_dataset, tmp_path):
@@ -835,11 +1148,84 @@ def _blender(tmp_path, meta_changes=None, frame_changes=None):
     ({}, {"file_path": 3}, "'file_path' must be a non-empty string"),
     ({}, {"depth_file_path": 3}, "'depth_file_path' must be a non-empty string"),
     ({"frames": {"file_path": "x"}}, {}, "missing or empty 'frames' list"),
+    # Camera models a pinhole cannot reproduce are refused, not read as pinholes.
+    ({"camera_model": "OPENCV", "k1": 0.1}, {}, r"transforms_train.json: distortion coefficient "
+                                                r"'k1' = 0.1 \(camera model OPENCV\)"),
+    ({"camera_model": "OPENCV"}, {"p2": -0.01}, r"frame 0: distortion coefficient 'p2' = -0.01"),
+    ({}, {"k2": 0.02}, r"frame 0: distortion coefficient 'k2' = 0.02 \(camera model PINHOLE\)"),
+    ({"camera_model": "OPENCV_FISHEYE"}, {}, r"'camera_model' is 'OPENCV_FISHEYE', which the "
+                                             r"pinhole renderer cannot reproduce"),
+    ({}, {"camera_model": 3}, "frame 0: 'camera_model' must be a string, got 3"),
+    ({"k3": "0"}, {}, "'k3' must be a finite number, got '0'"),
+    ({"camera_angle_x": None, "fl_y": 50.0}, {}, r"a vertical focal length \('fl_y' or "
+                                                 r"'camera_angle_y'\) without a horizontal one"),
+    ({"camera_angle_y": 4.0}, {}, r"'camera_angle_y' = 4.0 is not in \(0, pi\) radians"),
+    ({}, {"name": 3}, "frame 0: 'name' must be a non-empty string, got 3"),
 ])
 def test_blender_json_field_table(tmp_path, meta, frame, message):
   root = _blender(tmp_path, meta, frame)
   with pytest.raises(DatasetError, match=message):
     load_blender(root, "train")
+
+
+@pytest.mark.parametrize("meta, frame, expected", [
+    ({"camera_model": "OPENCV", "k1": 0.0, "k2": 0, "p1": 0.0, "p2": 0.0}, {},
+     {"fx": 3.0 / np.tan(0.4), "fy": 3.0 / np.tan(0.4)}),  # zero distortion: a pinhole
+    ({"camera_angle_y": 0.6}, {}, {"fx": 3.0 / np.tan(0.4), "fy": 2.0 / np.tan(0.3)}),
+    ({"fl_y": 7.5}, {}, {"fx": 3.0 / np.tan(0.4), "fy": 7.5}),  # fl_y beside camera_angle_x
+    ({"fl_x": 9.0}, {"fl_y": 8.0}, {"fx": 9.0, "fy": 8.0}),
+    ({"fl_x": 9.0}, {}, {"fx": 9.0, "fy": 9.0}),  # square pixels
+])
+def test_blender_intrinsics_per_axis(tmp_path, meta, frame, expected):
+  """Per axis: the focal length, else the field of view over the image size (6 x 4 here);
+  no vertical one: fy = fx."""
+  cameras = load_blender(_blender(tmp_path, meta, frame), "train").cameras
+  for key, value in expected.items():
+    np.testing.assert_allclose(float(getattr(cameras, key)[0]), value, rtol=1e-6)
+
+
+def _two_frames(tmp_path, second):
+  root = _blender(tmp_path)
+  meta = json.loads((root / "transforms_train.json").read_text())
+  meta["frames"].append({**meta["frames"][0], **second})
+  (root / "transforms_train.json").write_text(json.dumps(meta))
+  return root
+
+
+@pytest.mark.parametrize("second, message", [
+    ({}, r"frame 1: the image .*r_0.png is also that of frame 0; every frame must be a distinct"),
+    ({"file_path": "./train/r_0.png"}, r"frame 1: the image .*r_0.png is also that of frame 0"),
+    ({"file_path": "./train/r_1", "name": "train/r_0"},
+     r"frame 1: the view name 'train/r_0' is also that of frame 0"),
+])
+def test_blender_duplicate_frames_are_refused(tmp_path, second, message):
+  root = _two_frames(tmp_path, second)
+  Image.fromarray(np.zeros((4, 6, 4), np.uint8)).save(root / "train" / "r_1.png")
+  with pytest.raises(DatasetError, match=message):
+    load_blender(root, "train")
+
+
+def test_blender_reads_an_absolute_file_path(tmp_path):
+  """The image of an absolute `file_path` is read, and the view named by that path."""
+  elsewhere = tmp_path / "elsewhere"
+  elsewhere.mkdir()
+  Image.fromarray(np.full((4, 6, 4), 255, np.uint8)).save(elsewhere / "x.png")
+  (tmp_path / "data").mkdir()
+  root = _two_frames(tmp_path / "data", {"file_path": str(elsewhere / "x.png")})
+  views = load_blender(root, "train")
+  assert views.names == ("train/r_0", (elsewhere / "x").as_posix())
+  assert views.images[1].min() == 1.0
+
+
+@pytest.mark.parametrize("text, message", [
+    ('{"camera_angle_x": 0.8, "camera_angle_x": 0.9, "frames": []}',
+     "the key 'camera_angle_x' appears twice in one json object"),
+    ("[" * 100_000 + "]" * 100_000, "json nested too deeply"),
+])
+def test_json_that_a_reader_would_misread_is_refused(tmp_path, text, message):
+  (tmp_path / "t.json").write_text(text)
+  with pytest.raises(DatasetError, match=rf"t.json: {message}"):
+    read_json(tmp_path / "t.json")
 
 
 def test_blender_reads_16_bit_images_at_full_precision(tmp_path):
@@ -856,14 +1242,264 @@ def test_blender_reads_16_bit_images_at_full_precision(tmp_path):
     (np.zeros((2, 17), np.complex64), "expected a real number array, got dtype complex64"),
     (np.full((2, 17), "1.0"), "expected a real number array, got dtype <U3"),
     (np.zeros((2, 16)), r"expected an array of shape \[V, 17\]"),
+    ({"poses": np.zeros((2, 17))}, r"an .npz archive, not a .npy array"),
 ])
 def test_llff_poses_file_table(tmp_path, array, message):
+  (tmp_path / "images_8").mkdir()
+  if isinstance(array, dict):  # np.savez to a file object keeps the .npy name
+    with open(tmp_path / "poses_bounds.npy", "wb") as f:
+      np.savez(f, **array)
+  else:
+    np.save(tmp_path / "poses_bounds.npy", array, allow_pickle=True)
+  with pytest.raises(DatasetError, match=rf"poses_bounds.npy: .*{message}"):
+    load_llff(tmp_path)
+
+
+@pytest.mark.parametrize("files, message", [
+    ({"a.png": (16, 16), "a.jpg": (16, 16)}, r"images_8: two views have the file stem 'a'"),
+    ({"a.png": (16, 16), "b.png": (16, 8)}, r"b.png: image is 8x16 but a.png is 16x16"),
+    ({"a.png": (16, 8), "b.png": (16, 8)}, r"a.png: image is 8x16, not a scaled copy of the "
+                                           r"16x16 that .*poses_bounds.npy row 0 was calibrated"),
+])
+def test_llff_images_table(tmp_path, files, message):
   cams = Camera.create(np.stack([W2C] * 2), 8.0, 8.0, 8.0, 8.0, 16, 16)
   np.save(tmp_path / "poses_bounds.npy", poses_bounds_from_cameras(cams, [[1.0, 5.0]] * 2))
   (tmp_path / "images_8").mkdir()
-  np.save(tmp_path / "poses_bounds.npy", array, allow_pickle=True)
-  with pytest.raises(DatasetError, match=rf"poses_bounds.npy: .*{message}"):
+  for name, (h, w) in files.items():
+    Image.fromarray(np.zeros((h, w, 3), np.uint8)).save(tmp_path / "images_8" / name)
+  with pytest.raises(DatasetError, match=message):
     load_llff(tmp_path)
+
+
+# ---------------------------------------------------------------------- COLMAP models
+
+IMAGES_AB = ((1, (1.0, 0.0, 0.0, 0.0), "a.png"), (2, (1.0, 0.0, 0.0, 0.0), "b.png"))
+
+
+def _colmap_binary(root, cameras=((1, 1, 40, 30, (50.0, 60.0, 20.0, 15.0)),), images=IMAGES_AB,
+                   points=((1, (0.1, 0.2, 0.3), 1), (2, (0.0, 0.1, 0.2), 0))):
+  """A COLMAP sparse model written byte by byte in the documented binary layout (without the
+  rigs and frames of COLMAP 3.12+, which pycolmap then makes one per camera and image), and a
+  40 x 30 image per name.
+
+  cameras: (id, model id, width, height, params); images: (id, (qw, qx, qy, qz), name), each
+  at t = (0, 0, 2) with camera 1 and one 2D point; points: (id, xyz, track length), each
+  track element (image 1, 2D point 0).
+  """
+  sparse = root / "sparse" / "0"
+  sparse.mkdir(parents=True, exist_ok=True)
+  count = lambda items: struct.pack("<Q", len(items))
+  (sparse / "cameras.bin").write_bytes(count(cameras) + b"".join(
+      struct.pack("<IiQQ", i, m, w, h) + struct.pack(f"<{len(ps)}d", *ps)
+      for i, m, w, h, ps in cameras))
+  (sparse / "images.bin").write_bytes(count(images) + b"".join(
+      struct.pack("<I4d3dI", i, *q, 0.0, 0.0, 2.0, 1) + name.encode() + b"\0"
+      + struct.pack("<Qddq", 1, 5.0, 5.0, -1) for i, q, name in images))
+  (sparse / "points3D.bin").write_bytes(count(points) + b"".join(
+      struct.pack("<Q3d3BdQ", i, *xyz, 200, 100, 50, 0.5, t) + struct.pack("<II", 1, 0) * t
+      for i, xyz, t in points))
+  (root / "images").mkdir(exist_ok=True)
+  for _, _, name in images:
+    Image.fromarray(np.zeros((30, 40, 3), np.uint8)).save(root / "images" / name)
+  return root
+
+
+def _cut(name, n):
+  def damage(sparse):
+    data = (sparse / name).read_bytes()
+    (sparse / name).write_bytes(data[:-n])
+  return damage
+
+
+def _patch(name, offset, value):
+  def damage(sparse):
+    data = bytearray((sparse / name).read_bytes())
+    data[offset:offset + len(value)] = value
+    (sparse / name).write_bytes(bytes(data))
+  return damage
+
+
+IMAGE_RECORD = 4 + 56 + 4 + len("a.png\0") + 8 + 24  # images.bin: one image with one 2D point
+COLMAP_FILES_BAD = {  # damage to the model of `_colmap_binary`: the expected message
+    "points3D.bin 7 bytes short": (_cut("points3D.bin", 7),
+                                   r"points3D.bin: truncated: 3D point record 1 \(51 bytes"),
+    "points3D.bin 1 byte short": (_cut("points3D.bin", 1), r"points3D.bin: truncated: 3D point"),
+    "a track of 10^12 elements": (_patch("points3D.bin", 8 + 43, struct.pack("<Q", 10 ** 12)),
+                                  r"the track of 3D point record 0 runs past the end"),
+    "10^15 points declared": (_patch("points3D.bin", 0, struct.pack("<Q", 10 ** 15)),
+                              r"declares 1000000000000000 3D points of at least 51 bytes"),
+    "bytes after the last point": (lambda sp: open(sp / "points3D.bin", "ab").write(b"\0" * 9),
+                                   "9 bytes follow the last of the 3D points"),
+    "an empty points3D.bin": (lambda sp: (sp / "points3D.bin").write_bytes(b""),
+                              "points3D.bin: the file is empty"),
+    "images.bin cut in a name": (
+        lambda sp: (sp / "images.bin").write_bytes((sp / "images.bin").read_bytes()[
+            :8 + IMAGE_RECORD + 66]),
+        "the name of image 2 has no terminating NUL byte"),
+    "10^12 2D points declared": (
+        _patch("images.bin", 8 + 64 + 6, struct.pack("<Q", 10 ** 12)),
+        r"images.bin: truncated: the 1000000000000 2D points of image 'a.png'"),
+    "an image of a missing camera": (_patch("images.bin", 8 + 60, struct.pack("<I", 7)),
+                                     r"image 1 \('a.png'\) refers to camera 7, which "
+                                     "cameras.bin does not hold"),
+    "cameras.bin cut in the parameters": (_cut("cameras.bin", 5),
+                                          r"cameras.bin: truncated: the 4 parameters of camera 1"),
+    "an unknown camera model": (_patch("cameras.bin", 12, struct.pack("<i", 99)),
+                                "camera 1 has the model id 99, which COLMAP does not define"),
+}
+
+
+@pytest.mark.parametrize("case", COLMAP_FILES_BAD)
+def test_colmap_binary_files_are_walked_before_pycolmap(tmp_path, case):
+  """pycolmap trusts the counts: on these files it exhausts the memory, loops for ever or
+  reads leftover values. The walk refuses them first, naming the file and the record."""
+  pytest.importorskip("pycolmap")
+  root = _colmap_binary(tmp_path)
+  damage, message = COLMAP_FILES_BAD[case]
+  damage(root / "sparse" / "0")
+  with pytest.raises(DatasetError, match=message):
+    load_colmap(root)
+
+
+@pytest.mark.parametrize("name, cut", [("frames.bin", 3), ("rigs.bin", 3)])
+def test_colmap_rigs_and_frames_files_are_walked_too(tmp_path, name, cut):
+  """The rigs.bin and frames.bin that COLMAP 3.12+ (and pycolmap's writer) add."""
+  pytest.importorskip("pycolmap")
+  cams = Camera.create(np.stack([W2C] * 2), 6.0, 6.0, 4.0, 4.0, 8, 8)
+  sparse = export_colmap(tmp_path, Views(np.zeros((2, 8, 8, 3), np.float32), cams))
+  load_colmap(tmp_path)
+  _cut(name, cut)(sparse)
+  with pytest.raises(DatasetError, match=rf"{name}: truncated"):
+    load_colmap(tmp_path)
+
+
+Q0 = (0.0, 0.0, 0.0, 0.0)
+COLMAP_FIELDS_BAD = {  # _colmap_binary arguments: the expected message
+    "a zero quaternion": ({"images": ((1, Q0, "a.png"), IMAGES_AB[1])},
+                          r"image 'a.png': the rotation quaternion \(qw, qx, qy, qz\) = "
+                          r"\[0.0, 0.0, 0.0, 0.0\] has norm 0"),
+    "a quaternion of norm 2": ({"images": ((1, (2.0, 0, 0, 0), "a.png"), IMAGES_AB[1])},
+                               "has norm 2; COLMAP stores unit quaternions"),
+    "an image listed twice": ({"images": (IMAGES_AB[0], (2, (1.0, 0, 0, 0), "a.png"))},
+                              "the image 'a.png' is listed twice; view names must be unique"),
+    "a.png and a.jpg": ({"images": (IMAGES_AB[0], (2, (1.0, 0, 0, 0), "a.jpg"))},
+                        "the images 'a.jpg' and 'a.png' both give the view name 'a'"),
+    "camera width 0": ({"cameras": ((1, 1, 0, 30, (50.0, 60.0, 20.0, 15.0)),)},
+                       r"camera 1 \(used by image 'a.png'\): invalid image size width=0"),
+    "a NaN 3D point": ({"points": ((1, (0.1, NAN, 0.3), 0),)}, "3D point 1 is not finite"),
+}
+
+
+@pytest.mark.parametrize("case", COLMAP_FIELDS_BAD)
+def test_colmap_model_field_table(tmp_path, case):
+  pytest.importorskip("pycolmap")
+  kwargs, message = COLMAP_FIELDS_BAD[case]
+  with pytest.raises(DatasetError, match=message):
+    load_colmap(_colmap_binary(tmp_path, **kwargs))
+
+
+COLMAP_TEXT_BAD = {  # (cameras.txt, images.txt pose lines, points3D.txt): the expected message
+    "a name with a space": ("1 PINHOLE 40 30 50 60 20 15", ["1 1 0 0 0 0 0 2 1 my a.png"], "",
+                            r"images.txt line 1: the image name 'my a.png' contains a space"),
+    "colour 300": ("1 PINHOLE 40 30 50 60 20 15", ["1 1 0 0 0 0 0 2 1 a.png"],
+                   "4 1 2 3 300 128 0 0.5", r"points3D.txt line 1: colour R = 300 is outside "
+                                            r"0..255"),
+    "an image of a missing camera": ("1 PINHOLE 40 30 50 60 20 15", ["1 1 0 0 0 0 0 2 3 a.png"],
+                                     "", "image 'a.png' refers to camera 3, which cameras.txt"),
+    "width -40": ("1 PINHOLE -40 30 50 60 20 15", ["1 1 0 0 0 0 0 2 1 a.png"], "",
+                  "invalid image size width=18446744073709551576"),
+    "a line pycolmap cannot parse": ("1 PINHOLE 40 30 50 60 20 15", ["1 1 0 0 0 0 0 2 1 a.png"],
+                                     "4 1 x 3 255 128 0 0.5", "cannot read the COLMAP model"),
+}
+
+
+@pytest.mark.parametrize("case", COLMAP_TEXT_BAD)
+def test_colmap_text_model_table(tmp_path, case):
+  pytest.importorskip("pycolmap")
+  camera, images, points, message = COLMAP_TEXT_BAD[case]
+  sparse = tmp_path / "sparse" / "0"
+  sparse.mkdir(parents=True)
+  (sparse / "cameras.txt").write_text(camera + "\n")
+  (sparse / "images.txt").write_text("".join(line + "\n\n" for line in images))
+  (sparse / "points3D.txt").write_text(points + "\n")
+  (tmp_path / "images").mkdir()
+  Image.fromarray(np.zeros((30, 40, 3), np.uint8)).save(tmp_path / "images" / "a.png")
+  with pytest.raises(DatasetError, match=message):
+    load_colmap(tmp_path)
+
+
+# ---------------------------------------------------------------------- .ply headers
+
+PLY_PROPERTIES = "".join(f"property float {p}\n" for p in (
+    "x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0", "scale_1", "scale_2",
+    "rot_0", "rot_1", "rot_2", "rot_3"))
+
+
+@pytest.mark.parametrize("header, data, message", [
+    ("format binary_little_endian 1.0\nelement vertex 100000000000\n" + PLY_PROPERTIES,
+     b"\0" * 60, "truncated: the header declares 100000000000 vertex rows of 56 bytes, but the "
+                 "data ends in row 1, at property 'y'"),
+    ("format ascii 1.0\nelement vertex 100000000000\n" + PLY_PROPERTIES, b"1 2 3\n",
+     "ASCII PLY"),
+    ("format binary_little_endian 1.0\nelement face 10000000000\nproperty list uchar int idx\n"
+     "element vertex 1\n" + PLY_PROPERTIES, b"\0" * 60,
+     "truncated: the header declares 10000000000 face rows of at least 1 bytes"),
+], ids=["10^11 vertices", "ascii", "10^10 list rows"])
+def test_ply_headers_are_checked_against_the_file_before_reading(tmp_path, header, data, message):
+  """plyfile allocates the rows a header declares before reading them (terabytes here)."""
+  path = tmp_path / "bad.ply"
+  path.write_bytes(b"ply\n" + header.encode() + b"end_header\n" + data)
+  with pytest.raises(DatasetError, match=rf"bad.ply: {message}"):
+    load_ply(path)
+
+
+# ---------------------------------------------------------------------- Views, exports
+
+VIEWS = Views(np.zeros((2, 8, 8, 3), np.float32),
+              Camera.create(np.stack([W2C] * 2), 6.0, 6.0, 4.0, 4.0, 8, 8), names=("a", "b"))
+
+
+@pytest.mark.parametrize("changes, message", [
+    ({"names": ("a", "a")}, "Views.names repeats 'a'"),
+    ({"names": ("a",)}, r"Views.names must hold 2 names \(one per view\) or none, got 1"),
+    ({"alphas": np.ones((2, 8, 7))}, r"Views.alphas must have shape \[2, 8, 8\]"),
+    ({"images": np.zeros((2, 8, 8, 3), np.uint8)}, "Views.images must be floats"),
+    ({"cameras": Camera.create(W2C, 6.0, 6.0, 4.0, 4.0, 8, 8)},
+     r"Views.cameras must be a Camera batched over \[2\] .*got batch \(\)"),
+])
+@pytest.mark.parametrize("export", ["blender", "colmap"])
+def test_views_are_checked_before_export(tmp_path, changes, message, export):
+  views = VIEWS.replace(**changes)
+  with pytest.raises(ValueError, match=message):
+    views.validate()
+  if export == "colmap":
+    pytest.importorskip("pycolmap")
+  with pytest.raises(ValueError, match=message):
+    (export_blender if export == "blender" else export_colmap)(tmp_path, views)
+  assert not any(tmp_path.iterdir())  # nothing written
+
+
+@pytest.mark.parametrize("cameras, bounds, message", [
+    (VIEWS.cameras, np.ones((3, 2)), r"bounds must have shape \[V=2, 2\] \(near, far\)"),
+    (Camera.create(np.stack([W2C] * 2), 6.0, 7.0, 4.0, 4.0, 8, 8), np.ones((2, 2)),
+     r"cameras.fy\[0\] = 7.0, but LLFF stores one focal length .*: it must be 6.0"),
+    (Camera.create(np.stack([W2C] * 2), 6.0, 6.0, 4.0, [4.0, 3.5], 8, 8), np.ones((2, 2)),
+     r"cameras.cy\[1\] = 3.5, .* it must be 4.0"),
+])
+def test_llff_poses_are_written_only_when_the_format_holds_them(cameras, bounds, message):
+  with pytest.raises(ValueError, match=message):
+    poses_bounds_from_cameras(cameras, bounds)
+
+
+def test_export_colmap_checks_its_points(tmp_path):
+  pytest.importorskip("pycolmap")
+  with pytest.raises(ValueError, match=r"points must hold xyz \[P, 3\] and rgb \[P, 3\]"):
+    export_colmap(tmp_path, VIEWS, PointCloud(np.zeros((3, 3)), np.zeros((2, 3))))
+  with pytest.raises(ValueError, match=r"points.xyz\[1\] is not finite"):
+    export_colmap(tmp_path, VIEWS, PointCloud(np.array([[0, 0, 0], [NAN, 0, 0]]),
+                                              np.zeros((2, 3))))
+  with pytest.raises(ValueError, match=r"percentile must be a number in \[0, 50\)"):
+    PointCloud(np.zeros((3, 3)), np.zeros((3, 3))).box(60)
 
 
 # ====================================================================== the capture cache

@@ -44,14 +44,27 @@ def require_file(path, what="file"):
 def read_json(path):
   """Parses a json file; DatasetError with the file and position when malformed."""
   path = require_file(path, "json file")
+
+  def unique_keys(pairs):
+    seen = set()
+    for key, _ in pairs:
+      if key in seen:
+        raise DatasetError(f"{path}: the key {key!r} appears twice in one json object (a "
+                           "json reader keeps one of the two silently).")
+      seen.add(key)
+    return dict(pairs)
+
   try:
     with open(path, encoding="utf-8") as f:
-      return json.load(f)
+      return json.load(f, object_pairs_hook=unique_keys)
   except json.JSONDecodeError as e:
     raise DatasetError(f"{path}: malformed json ({e.msg} at line {e.lineno}, column "
                        f"{e.colno}).") from e
   except UnicodeDecodeError as e:
     raise DatasetError(f"{path}: not a UTF-8 text file ({e}).") from e
+  except RecursionError as e:
+    raise DatasetError(f"{path}: json nested too deeply to read (thousands of levels): not a "
+                       "dataset file.") from e
 
 
 def read_image(path):
@@ -164,11 +177,7 @@ def image_scale(file, shape, first, calibrated, first_name, calibrated_for):
   if tuple(shape) != tuple(first):
     raise DatasetError(f"{file}: image is {w}x{h} but {first_name} is {first[1]}x{first[0]}; "
                        "all images must share one size.")
-  sx, sy = w / cam_w, h / cam_h
-  if min(cam_w, cam_h) * abs(sx - sy) > 2.0:
-    raise DatasetError(f"{file}: image is {w}x{h}, not a scaled copy of the {cam_w}x{cam_h} "
-                       f"that {calibrated_for} was calibrated for.")
-  return sx, sy
+  return check_scaled_copy(shape, (cam_h, cam_w), file, calibrated_for)
 
 
 def area_downscale(x, factor, path=None):
@@ -185,6 +194,28 @@ def area_downscale(x, factor, path=None):
     raise DatasetError(f"{where}image size {w}x{h} is not divisible by downscale={factor}.")
   blocks = x.reshape(h // factor, factor, w // factor, factor, *x.shape[2:])
   return blocks.mean(axis=(1, 3), dtype=np.float64).astype(x.dtype)
+
+
+def check_scaled_copy(image_size, calibrated_size, path, calibration):
+  """(sx, sy): the scale of an image [height, width] against the [height, width] its camera
+  was calibrated for; DatasetError unless it is a scaled copy (same aspect ratio, up to the
+  rounding of each side to whole pixels: one scale reproduces the other side within 2
+  pixels). `calibration` names where the calibrated size comes from."""
+  (h, w), (cal_h, cal_w) = image_size, calibrated_size
+  sx, sy = w / cal_w, h / cal_h
+  if min(cal_w, cal_h) * abs(sx - sy) > 2.0:
+    raise DatasetError(f"{path}: image is {w}x{h}, not a scaled copy of the {cal_w:g}x{cal_h:g} "
+                       f"that {calibration} was calibrated for.")
+  return sx, sy
+
+
+def unique_names(names, where, what="view name"):
+  """DatasetError naming the first repeated name (views are looked up by name)."""
+  seen = set()
+  for name in names:
+    if name in seen:
+      raise DatasetError(f"{where}: two views have the {what} {name!r}; names must be unique.")
+    seen.add(name)
 
 
 def check_downscale(downscale):

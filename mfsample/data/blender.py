@@ -7,7 +7,12 @@ Format (Mildenhall et al. 2020), as read here:
   and `transform_matrix`, a camera-to-world matrix in OpenGL / Blender camera axes (x right,
   y up, looking down -z).
 * Optional intrinsics in pixels, top-level or per frame (the instant-ngp extension, written
-  by `export_blender`): `fl_x`, `fl_y`, `cx`, `cy`, `w`, `h`. They override `camera_angle_x`.
+  by `export_blender`): `fl_x`, `fl_y`, `cx`, `cy`, `w`, `h` (and `camera_angle_y`). They
+  override `camera_angle_x`. A `camera_model` and distortion coefficients (nerfstudio) are
+  accepted only when a pinhole reproduces them: `mfsample.data.transforms_json` holds the
+  rules, shared with other transforms.json readers.
+* Every frame's image must be distinct, and so must the view names; `file_path` may be
+  absolute (the name is then the absolute path without its suffix).
 * Depth, optional, per frame:
   - `depth_file_path`: a float32 `.npy` of metric camera z-depth (0 where nothing was hit),
     written by `export_blender` -> `Views.depths`;
@@ -20,13 +25,11 @@ from pathlib import Path
 import numpy as np
 
 from mfsample.camera import Camera
-from mfsample.data import _io
+from mfsample.data import _io, transforms_json
 from mfsample.data.views import Views
 
 # OpenGL / Blender camera axes -> OpenCV camera axes (flip y and z).
 GL_TO_CV = np.diag([1.0, -1.0, -1.0, 1.0])
-
-_INTRINSIC_KEYS = ("fl_x", "fl_y", "cx", "cy", "w", "h")
 
 
 def available_splits(path):
@@ -75,9 +78,17 @@ def load_blender(path, split, *, downscale=1, background=(1.0, 1.0, 1.0)) -> Vie
 
   images, alphas, depths, codes, names, c2ws, intrinsics = [], [], [], [], [], [], []
   size = None
+  seen = {}  # image file or view name -> the first frame that has it
   for index, frame in enumerate(frames):
     where = f"{json_path} frame {index}"
     image_path = _image_path(root, frame, where)
+    name = _frame_name(frame, root, image_path, where)
+    for key, what in ((image_path.resolve(), f"the image {image_path}"),
+                      (("name", name), f"the view name {name!r}")):
+      if key in seen:
+        raise _io.DatasetError(f"{where}: {what} is also that of frame {seen[key]}; every "
+                               "frame must be a distinct view.")
+      seen[key] = index
     color, alpha = _io.read_image(image_path)
     if size is None:
       size = color.shape[:2]
@@ -93,10 +104,11 @@ def load_blender(path, split, *, downscale=1, background=(1.0, 1.0, 1.0)) -> Vie
     color, alpha = _downscale_rgba(color, alpha, downscale, image_path)
     images.append(color)
     alphas.append(alpha)
-    names.append(_frame_name(frame, root, image_path))
+    names.append(name)
     c2ws.append(_io.validate_rigid(_get(frame, "transform_matrix", where), where,
                                    "'transform_matrix'"))
-    intrinsics.append(_intrinsics(meta, frame, size, where, json_path))
+    fields = transforms_json.FrameFields(meta, frame, where, json_path)
+    intrinsics.append(transforms_json.intrinsics(fields, size))
 
   has_alpha = any(a is not None for a in alphas)
   alpha_arr = None
@@ -171,45 +183,18 @@ def _image_path(root, frame, where):
   return _io.require_file(path, f"image of {where}")
 
 
-def _frame_name(frame, root, image_path):
-  if isinstance(frame.get("name"), str):
+def _frame_name(frame, root, image_path, where):
+  """The frame's `name`, else its image path relative to the dataset folder (the absolute
+  path for an image outside it) without the suffix."""
+  if "name" in frame:
+    if not isinstance(frame["name"], str) or not frame["name"]:
+      raise _io.DatasetError(f"{where}: 'name' must be a non-empty string, got "
+                             f"{frame['name']!r}.")
     return frame["name"]
-  return image_path.relative_to(root).with_suffix("").as_posix()
-
-
-def _intrinsics(meta, frame, size, where, json_path):
-  """(fx, fy, cx, cy) in pixels of the full-size image."""
-  height, width = size
-  # A per-frame key overrides the top-level one; errors name where the value came from.
-  source = {k: (frame, where) if k in frame else (meta, str(json_path))
-            for k in _INTRINSIC_KEYS + ("camera_angle_x",)}
-
-  def value(key, **kw):
-    mapping, at = source[key]
-    return None if mapping.get(key) is None else _io.number(mapping, key, at, **kw)
-
-  for key in ("w", "h"):
-    expected = width if key == "w" else height
-    got = value(key, integer=True)
-    if got is not None and got != expected:
-      raise _io.DatasetError(f"{where}: '{key}' = {got} but the image is {width}x{height}.")
-  fx, fy = value("fl_x"), value("fl_y")
-  if fx is not None:
-    fy = fx if fy is None else fy
-  else:
-    angle = value("camera_angle_x")
-    if angle is None:
-      raise _io.DatasetError(f"{where}: missing key 'camera_angle_x' (or 'fl_x').")
-    if not 0.0 < angle < np.pi:
-      raise _io.DatasetError(f"{source['camera_angle_x'][1]}: 'camera_angle_x' = {angle} is "
-                             "not in (0, pi) radians.")
-    fx = fy = 0.5 * width / np.tan(0.5 * angle)
-  cx, cy = value("cx"), value("cy")
-  cx = 0.5 * width if cx is None else cx
-  cy = 0.5 * height if cy is None else cy
-  if fx <= 0 or fy <= 0:
-    raise _io.DatasetError(f"{where}: focal lengths must be > 0, got fl_x={fx}, fl_y={fy}.")
-  return np.array([fx, fy, cx, cy])
+  try:
+    return image_path.relative_to(root).with_suffix("").as_posix()
+  except ValueError:  # an absolute file_path elsewhere
+    return image_path.with_suffix("").as_posix()
 
 
 def _downscale_rgba(color, alpha, factor, path):

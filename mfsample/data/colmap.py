@@ -20,8 +20,13 @@ Conventions, as read here:
   parameters are all exactly zero. Any other camera gets an error naming it: undistort the
   capture first (COLMAP's `image_undistorter`, as 3DGS's `convert.py` does).
 * Views are ordered by image name (as 3DGS and nerfstudio order them), and named by the
-  image name without its extension. Images without a pose are not part of the model and
-  are skipped.
+  image name without its extension; an image listed twice, or two images that would share a
+  view name (`a.png`, `a.jpg`), are refused. Images without a pose are not part of the model
+  and are skipped. Rotation quaternions must have norm 1 (a zero one is refused, not read as
+  the identity).
+* The model files are walked before pycolmap reads them (`colmap_files`): a truncated or
+  corrupt binary file gives a `DatasetError` naming the file and the record, never a reader
+  that exhausts the memory.
 * The sparse points come with their colours, for the "SfM points" initialisation of 3DGS.
 * Coordinates are returned as stored (no recentring or rescaling; 3DGS uses them as they
   are and derives the scene extent from the cameras).
@@ -36,7 +41,7 @@ from typing import NamedTuple
 import numpy as np
 
 from mfsample.camera import Camera
-from mfsample.data import _io
+from mfsample.data import _io, colmap_files
 from mfsample.data.views import Views
 
 # Camera models read as pinholes: {model: number of leading focal / principal point
@@ -70,6 +75,8 @@ class PointCloud(NamedTuple):
     a real reconstruction always has."""
     if len(self.xyz) == 0:
       raise ValueError("the point cloud is empty")
+    if isinstance(percentile, bool) or not 0.0 <= percentile < 50.0:
+      raise ValueError(f"percentile must be a number in [0, 50), got {percentile!r}")
     low = np.percentile(self.xyz, percentile, axis=0)
     high = np.percentile(self.xyz, 100.0 - percentile, axis=0)
     return low.astype(np.float32), high.astype(np.float32)
@@ -108,6 +115,8 @@ def read_reconstruction(sparse):
     if not any((sparse / f"{name}{ext}").is_file() for ext in (".bin", ".txt")):
       raise FileNotFoundError(f"{sparse / (name + '.bin')} not found (nor {name}.txt): a "
                               "COLMAP sparse model has cameras, images and points3D files.")
+  # pycolmap trusts the files' counts (a truncated file can exhaust the memory): walk first.
+  colmap_files.check_model_files(sparse)
   try:
     return pycolmap.Reconstruction(str(sparse))
   except (ValueError, IndexError, RuntimeError, OSError) as e:
@@ -153,6 +162,7 @@ def load_colmap(path, *, factor=1, sparse=None, background=(1.0, 1.0, 1.0)):
                    key=lambda e: e[0])
   if not entries:
     raise _io.DatasetError(f"{sparse}: the model has no posed images.")
+  _check_view_names([name for name, _ in entries], sparse)
   intrinsics = {}
   images, alphas, w2cs, ks, names = [], [], [], [], []
   size = None
@@ -166,7 +176,7 @@ def load_colmap(path, *, factor=1, sparse=None, background=(1.0, 1.0, 1.0)):
     sx, sy = _io.image_scale(file, color.shape[:2], size, (cam_w, cam_h), entries[0][0],
                              f"camera {image.camera_id} of {sparse}")
     where = f"{sparse} image {name!r}"
-    w2c = _io.validate_rigid(_pose_matrix(image), where)
+    w2c = _io.validate_rigid(_pose_matrix(image, where), where)
     if alpha is not None:
       color = color * alpha[..., None] + (1.0 - alpha[..., None]) * bg
     images.append(color)
@@ -192,8 +202,10 @@ def points_of(recon):
   ids = sorted(recon.points3D)
   xyz = np.array([recon.points3D[i].xyz for i in ids], np.float64).reshape(-1, 3)
   rgb = np.array([recon.points3D[i].color for i in ids], np.float64).reshape(-1, 3)
-  if not np.all(np.isfinite(xyz)):
-    raise _io.DatasetError("the COLMAP model has non-finite 3D points.")
+  bad = ~np.all(np.isfinite(xyz), axis=-1)
+  if np.any(bad):
+    raise _io.DatasetError(f"the COLMAP model's 3D point {ids[int(np.argmax(bad))]} is not "
+                           f"finite ({int(bad.sum())} of {len(ids)} points).")
   return PointCloud(xyz.astype(np.float32), (rgb / 255.0).astype(np.float32))
 
 
@@ -202,12 +214,38 @@ def _has_pose(image):
   return has_pose() if callable(has_pose) else bool(has_pose)
 
 
-def _pose_matrix(image):
+# COLMAP writes unit quaternions; pycolmap keeps a stored one as it is and normalises it only
+# to build the matrix, so a zero quaternion would silently become the identity rotation.
+QUATERNION_TOLERANCE = 1e-2
+
+
+def _pose_matrix(image, where):
   """[3, 4] cam_from_world of a pycolmap image (a method since pycolmap 3.12, a property
-  before)."""
+  before); DatasetError unless its quaternion is finite with norm 1 (within 1e-2)."""
   pose = image.cam_from_world
   pose = pose() if callable(pose) else pose
+  quat = np.asarray(pose.rotation.quat, np.float64)  # (x, y, z, w)
+  norm = float(np.linalg.norm(quat))
+  if not abs(norm - 1.0) <= QUATERNION_TOLERANCE:
+    raise _io.DatasetError(f"{where}: the rotation quaternion (qw, qx, qy, qz) = "
+                           f"{quat[[3, 0, 1, 2]].tolist()} has norm {norm:.4g}; COLMAP stores "
+                           "unit quaternions (a zero one is no rotation).")
   return np.asarray(pose.matrix(), np.float64)
+
+
+def _check_view_names(names, sparse):
+  """Views are named by the image name without its extension: refuse an image listed twice,
+  and two images (`a.png`, `a.jpg`) that would give one view name."""
+  stems = {}
+  for name in names:
+    stem = str(Path(name).with_suffix(""))
+    if stem in stems:
+      twice = stems[stem] == name
+      raise _io.DatasetError(
+          f"{sparse}: " + (f"the image {name!r} is listed twice" if twice else
+                           f"the images {stems[stem]!r} and {name!r} both give the view name "
+                           f"{stem!r}") + "; view names must be unique.")
+    stems[stem] = name
 
 
 def _pinhole(camera, sparse, image_name):
@@ -231,7 +269,11 @@ def _pinhole(camera, sparse, image_name):
   values = np.array([fx, fy, cx, cy])
   if not np.all(np.isfinite(values)) or fx <= 0 or fy <= 0:
     raise _io.DatasetError(f"{where}: invalid intrinsics fx={fx}, fy={fy}, cx={cx}, cy={cy}.")
-  return (float(fx), float(fy), float(cx), float(cy)), (int(camera.width), int(camera.height))
+  size = int(camera.width), int(camera.height)
+  if not all(1 <= v < 2 ** 31 for v in size):  # a negative text value wraps to 2^64 - v
+    raise _io.DatasetError(f"{where}: invalid image size width={size[0]}, height={size[1]} "
+                           "(must be >= 1).")
+  return (float(fx), float(fy), float(cx), float(cy)), size
 
 
 def _image_file(image_dir, name):
@@ -278,11 +320,17 @@ def export_colmap(path, views: Views, points: PointCloud | None = None, *, binar
   sparse = root / "sparse" / "0"
   if any(sparse.glob("cameras.*")) and not overwrite:
     raise FileExistsError(f"{sparse} holds a model; pass overwrite=True to replace it.")
+  views.validate()
+  if points is not None:
+    xyz, rgb = np.asarray(points.xyz, np.float64), np.asarray(points.rgb, np.float64)
+    if xyz.ndim != 2 or xyz.shape[1] != 3 or rgb.shape != xyz.shape:
+      raise ValueError(f"points must hold xyz [P, 3] and rgb [P, 3], got {list(xyz.shape)} "
+                       f"and {list(rgb.shape)}")
+    bad = ~np.all(np.isfinite(xyz), axis=-1)
+    if np.any(bad):
+      raise ValueError(f"points.xyz[{int(np.argmax(bad))}] is not finite")
   images = np.asarray(views.images, np.float32)
   cameras = views.cameras
-  if images.ndim != 4 or images.shape[-1] != 3 or cameras.batch_shape != (len(images),):
-    raise ValueError(f"views must hold [V, H, W, 3] images and V cameras, got images "
-                     f"{images.shape} and cameras {cameras.batch_shape}")
   (root / "images").mkdir(parents=True, exist_ok=True)
   sparse.mkdir(parents=True, exist_ok=True)
   recon = pycolmap.Reconstruction()

@@ -40,15 +40,13 @@ def export_blender(path, views: Views, *, split="train", background=(1.0, 1.0, 1
   json_path = root / f"transforms_{split}.json"
   if json_path.exists() and not overwrite:
     raise FileExistsError(f"{json_path} exists; pass overwrite=True to replace it.")
+  views.validate()
   cameras = views.cameras
   images = np.asarray(views.images, np.float32)
-  if images.ndim != 4 or images.shape[-1] != 3:
-    raise ValueError(f"views.images must be [V, H, W, 3], got {images.shape}")
   num, height, width = images.shape[:3]
-  if cameras.batch_shape != (num,) or (cameras.height, cameras.width) != (height, width):
-    raise ValueError(f"cameras (batch {cameras.batch_shape}, {cameras.width}x"
-                     f"{cameras.height}) do not match images {images.shape}.")
   bg = np.asarray(background, np.float32)
+  if bg.shape != (3,) or not np.all(np.isfinite(bg)):
+    raise ValueError(f"background must be 3 finite numbers, got {background!r}")
   (root / split).mkdir(parents=True, exist_ok=True)
 
   w2c = np.asarray(cameras.world_to_camera, np.float64)

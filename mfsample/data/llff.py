@@ -50,8 +50,12 @@ def load_llff(path, *, factor=8):
   poses_path = _io.require_file(root / "poses_bounds.npy", "LLFF poses file")
   try:
     data = np.load(poses_path, allow_pickle=False)
-  except (ValueError, OSError) as e:
+  except (ValueError, OSError, EOFError) as e:
     raise _io.DatasetError(f"{poses_path}: cannot read ({e}).") from e
+  if not isinstance(data, np.ndarray):  # np.load opens an .npz archive under any name
+    data.close()
+    raise _io.DatasetError(f"{poses_path}: an .npz archive, not a .npy array; LLFF stores one "
+                           "[V, 17] array (np.save).")
   if not (np.issubdtype(data.dtype, np.floating) or np.issubdtype(data.dtype, np.integer)):
     raise _io.DatasetError(f"{poses_path}: expected a real number array, got dtype "
                            f"{data.dtype}.")
@@ -76,6 +80,7 @@ def load_llff(path, *, factor=8):
   if len(files) != len(mats):
     raise _io.DatasetError(f"{image_dir}: {len(files)} images but {poses_path} has "
                            f"{len(mats)} poses.")
+  _io.unique_names([f.stem for f in files], image_dir, "file stem")
   images = []
   for file in files:
     color, _ = _io.read_image(file)
@@ -94,8 +99,9 @@ def load_llff(path, *, factor=8):
     h, w, f = mat[:, 4]
     if h <= 0 or w <= 0 or f <= 0:
       raise _io.DatasetError(f"{where}: invalid (h, w, focal) = ({h}, {w}, {f}).")
+    # Per-axis scale: folders made by LLFF's minify round the image size.
+    _io.check_scaled_copy((height, width), (h, w), files[v], where)
   hwf = mats[:, :, 4]
-  # Per-axis scale: folders made by LLFF's minify round the image size.
   sx, sy = width / hwf[:, 1], height / hwf[:, 0]
   w2c = _io.invert_rigid(c2w).astype(np.float32)
   cameras = Camera.create(w2c, (hwf[:, 2] * sx).astype(np.float32),
@@ -116,10 +122,27 @@ def poses_bounds_from_cameras(cameras, bounds):
     cameras: a batched `Camera`.
     bounds: [V, 2] (near, far).
   """
+  if not isinstance(cameras, Camera) or len(cameras.batch_shape) != 1:
+    raise ValueError("cameras must be a Camera batched over one axis [V]")
+  num = cameras.batch_shape[0]
+  bounds = np.asarray(bounds, np.float64)
+  if bounds.shape != (num, 2):
+    raise ValueError(f"bounds must have shape [V={num}, 2] (near, far), got "
+                     f"{list(bounds.shape)}")
+  # The format stores one focal length and no principal point: anything else would be lost.
+  k = {n: np.asarray(getattr(cameras, n), np.float64) for n in ("fx", "fy", "cx", "cy")}
+  for name, want in (("fy", k["fx"]), ("cx", 0.5 * cameras.width),
+                     ("cy", 0.5 * cameras.height)):
+    value, want = np.broadcast_arrays(k[name], want)
+    off = np.abs(value - want) > 1e-5 * np.maximum(np.abs(want), 1.0)
+    if np.any(off):
+      i = int(np.argmax(off))
+      raise ValueError(f"cameras.{name}[{i}] = {value[i]}, but LLFF stores one focal length and "
+                       f"a centred principal point: it must be {want[i]}")
   w2c = np.asarray(cameras.world_to_camera, np.float64)
   c2w = _io.invert_rigid(w2c)
   rot = c2w[:, :3, :3] @ LLFF_TO_CV  # symmetric and orthogonal: its own inverse
-  fx = np.asarray(cameras.fx, np.float64)
+  fx = k["fx"]
   hwf = np.stack([np.full_like(fx, cameras.height), np.full_like(fx, cameras.width), fx], -1)
   mats = np.concatenate([rot, c2w[:, :3, 3:4], hwf[:, :, None]], axis=-1)
-  return np.concatenate([mats.reshape(-1, 15), np.asarray(bounds, np.float64)], axis=-1)
+  return np.concatenate([mats.reshape(-1, 15), bounds], axis=-1)

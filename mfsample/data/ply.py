@@ -158,6 +158,7 @@ def read_vertex_table(path):
   """
   path = require_file(path, ".ply file")
   plyfile = _plyfile()
+  _check_header(path)
   try:
     # mmap=False: the data is copied (memory maps of a file stay open), and a truncated
     # file is reported with the row and property where the data ends.
@@ -169,10 +170,7 @@ def read_vertex_table(path):
   except (UnicodeDecodeError, ValueError) as e:
     raise DatasetError(f"{path}: cannot be read as a PLY file ({e}).") from e
   if data.text:
-    raise DatasetError(
-        f"{path}: ASCII PLY; 3DGS models are binary little-endian files. Convert it with "
-        "plyfile: d = plyfile.PlyData.read(src); d.text = False; d.byte_order = '<'; "
-        "d.write(dst).")
+    raise DatasetError(_ASCII_MESSAGE.format(path=path))
   names = [e.name for e in data.elements]
   if "vertex" not in names:
     raise DatasetError(f"{path}: no 'vertex' element (elements: {', '.join(names) or 'none'}).")
@@ -182,6 +180,71 @@ def read_vertex_table(path):
     raise DatasetError(f"{path}: vertex property {lists[0]!r} is a list; a 3DGS file has "
                        "scalar properties only.")
   return vertex.data
+
+
+_ASCII_MESSAGE = ("{path}: ASCII PLY; 3DGS models are binary little-endian files. Convert it "
+                  "with plyfile: d = plyfile.PlyData.read(src); d.text = False; "
+                  "d.byte_order = '<'; d.write(dst).")
+_SCALAR_BYTES = {"char": 1, "int8": 1, "uchar": 1, "uint8": 1, "short": 2, "int16": 2,
+                 "ushort": 2, "uint16": 2, "int": 4, "int32": 4, "uint": 4, "uint32": 4,
+                 "float": 4, "float32": 4, "double": 8, "float64": 8}
+_MAX_HEADER = 1 << 20
+
+
+def _check_header(path):
+  """Checks what the header declares against the file before plyfile reads it.
+
+  plyfile allocates the rows an element declares before reading them, so a header that
+  declares 10^11 vertices (a corrupt count, or a file cut short) asks for terabytes. Here an
+  ASCII file is refused at once, and the scalar elements up to the first one with a list
+  property must fit in the data that follows the header. Headers this simple parser does not
+  understand are left to plyfile, which reports them.
+  """
+  with open(path, "rb") as f:
+    head = f.read(_MAX_HEADER)
+    size = f.seek(0, 2)
+  end = head.find(b"end_header")
+  if not head.startswith(b"ply") or end < 0:
+    return
+  newline = head.find(b"\n", end)
+  if newline < 0:
+    return
+  lines = head[:end].decode("ascii", "replace").splitlines()
+  elements = []  # [name, count, [(property, bytes)], whether it has a list property]
+  for line in lines[1:]:
+    words = line.split()
+    if words[:1] == ["format"] and words[1:2] == ["ascii"]:
+      raise DatasetError(_ASCII_MESSAGE.format(path=path))
+    if words[:1] == ["element"] and len(words) == 3 and words[2].isdigit():
+      elements.append([words[1], int(words[2]), [], False])
+    elif words[:1] == ["property"] and elements:
+      if words[1:2] == ["list"] and len(words) == 5 and words[2] in _SCALAR_BYTES:
+        elements[-1][2].append((words[4], _SCALAR_BYTES[words[2]]))  # at least its length
+        elements[-1][3] = True
+      elif len(words) == 3 and words[1] in _SCALAR_BYTES:
+        elements[-1][2].append((words[2], _SCALAR_BYTES[words[1]]))
+      else:
+        return  # a header plyfile will report
+  left = size - (newline + 1)
+  for name, count, properties, has_list in elements:
+    row = sum(b for _, b in properties)  # the exact row size, or a lower bound with lists
+    if count * row > left:
+      r, offset = divmod(left, row) if row else (0, 0)
+      at = next((p for p, end in _ends(properties) if end > offset), name)
+      raise DatasetError(f"{path}: truncated: the header declares {count} {name} rows of "
+                         f"{'at least ' if has_list else ''}{row} bytes, but the data ends "
+                         f"in row {r}, at property {at!r} ({left} bytes of data).")
+    if has_list:
+      return  # rows vary in size from here on: plyfile reads them one by one
+    left -= count * row
+
+
+def _ends(properties):
+  """(name, byte offset of its end within the row) of each property."""
+  end = 0
+  for name, b in properties:
+    end += b
+    yield name, end
 
 
 def load_ply(path):

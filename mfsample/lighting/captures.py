@@ -58,16 +58,26 @@ def capture(basis, xi):
 
   Linear radiance, signed where the light is; `mfsample.scenes.relight` per camera.
   """
-  basis = np.asarray(basis)
+  basis = _check_basis(basis)
   xi = lights_lib.check_light(xi, basis.shape[1])
   return np.einsum("vbhwc,b->vhwc", basis, xi.astype(basis.dtype)).astype(np.float32)
 
 
 def capture_many(basis, lights):
   """Images [K, V, H, W, 3] under each of `lights` [K, n]."""
-  basis = np.asarray(basis)
+  basis = _check_basis(basis)
   lights = lights_lib.check_lights(lights, basis.shape[1])
   return np.einsum("vbhwc,kb->kvhwc", basis, lights.astype(basis.dtype)).astype(np.float32)
+
+
+def _check_basis(basis):
+  basis = np.asarray(basis)
+  if basis.ndim != 5 or basis.shape[-1] != 3:
+    raise ValueError(f"basis must have shape [V, n, H, W, 3] (images under each basis light), "
+                     f"got {list(basis.shape)}")
+  if not np.issubdtype(basis.dtype, np.floating):
+    raise ValueError(f"basis must hold floats (linear radiance), got dtype {basis.dtype}")
+  return basis
 
 
 def make_light_data(cfg, light_coeffs) -> LightData:

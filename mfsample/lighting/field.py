@@ -28,13 +28,15 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from mfsample import samplers
+from mfsample import arg_checks, samplers
 from mfsample.gaussians import Gaussians
+from mfsample.lighting import lights as lights_lib
 from mfsample.model import (
     LOG_SCALE_RANGE,
     Model,
     Params,
-    capacity_bucket,
+    check_init_scales,
+    check_initial,
     host_rng,
     init_spread,
     knn_scale,
@@ -133,6 +135,11 @@ def radiance(raw, xi, dirs):
     dirs: [C, 3] unit view directions.
   """
   t = transfer_matrix(raw)
+  if np.shape(xi) != (t.shape[2],):
+    raise ValueError(f"xi must be one SH light of {t.shape[2]} coefficients (shape "
+                     f"[{t.shape[2]}]), got shape {list(np.shape(xi))}")
+  if np.shape(dirs) != (t.shape[0], 3):
+    raise ValueError(f"dirs must have shape [C={t.shape[0]}, 3], got {list(np.shape(dirs))}")
   degree = math.isqrt(t.shape[1]) - 1
   y = sh_lib.sh_basis(dirs.astype(t.dtype), degree)
   return jnp.einsum("ca,cabk,b->ck", y, t, jnp.asarray(xi, t.dtype))
@@ -147,11 +154,16 @@ def relit_gaussians(raw, mask, xi, camera):
 def render_relit(raw, mask, xi, camera, *, settings: RenderSettings, screen_offset=None):
   """Linear radiance image [H, W, 3] (in `.rgb`) of raw parameters under the light xi.
 
-  The background is black (radiance 0), as in the oracle's captures; nothing is clamped.
+  The background is black (radiance 0), as in the oracle's captures; nothing is clamped. A
+  concrete non-finite `xi` raises ValueError; a traced one gives a NaN image (its radiance
+  would be culled Gaussian by Gaussian, leaving a black image that looks valid).
   """
+  if not arg_checks.is_traced(xi):
+    xi = lights_lib.check_light(xi, raw["transfer_dc"].shape[2])
   g, features = relit_gaussians(raw, mask, xi, camera)
-  return render(g, camera, settings=settings, features=features,
-                screen_offset=screen_offset)
+  out = render(g, camera, settings=settings, features=features, screen_offset=screen_offset)
+  return out._replace(rgb=arg_checks.nan_unless(arg_checks.all_finite(jnp.asarray(xi)),
+                                                out.rgb))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -218,18 +230,14 @@ def init_relightable(key, points, *, spec, out_coeffs, light_coeffs, init_scales
   Returns:
     `Model` with the first N rows live (float32; `sh_degree` is unused and 0).
   """
-  points = np.asarray(points, np.float64)
-  if points.ndim != 2 or points.shape[1] != 3 or len(points) < 1:
-    raise ValueError(f"points must have shape [N >= 1, 3], got {points.shape}")
+  points, capacity = check_initial(points, capacity, init_opacity)
   shapes = group_shapes(out_coeffs, light_coeffs)
   unknown = set(spec.groups) - set(shapes)
   if unknown:
     raise ValueError(f"stochastic groups {sorted(unknown)} are not groups of a relightable "
                      f"model with m={out_coeffs}: {tuple(shapes)}")
+  check_init_scales(init_scales, spec, shapes)
   n = len(points)
-  capacity = capacity_bucket(n) if capacity is None else int(capacity)
-  if capacity < n:
-    raise ValueError(f"capacity {capacity} < number of points {n}")
   quats = np.zeros((n, 4))
   quats[:, 0] = 1.0
   mean = {"means": points,

@@ -19,6 +19,7 @@ import math
 
 import numpy as np
 
+from mfsample import arg_checks
 from mfsample.renderer import sh as sh_lib
 
 UNIFORM_NORM = math.sqrt(4.0 * math.pi)  # |xi| of the uniform light L = 1.
@@ -26,6 +27,7 @@ UNIFORM_NORM = math.sqrt(4.0 * math.pi)  # |xi| of the uniform light L = 1.
 
 def uniform_light(n):
   """[n] the uniform light L = 1 (only the DC coefficient, sqrt(4 pi))."""
+  degree_of(n)
   xi = np.zeros(n)
   xi[0] = UNIFORM_NORM
   return xi
@@ -59,7 +61,10 @@ def check_lights(lights, n, name="lights"):
 
 def on_sphere(xi, norm=UNIFORM_NORM):
   """xi scaled to |xi| = norm (ValueError for a zero light, which has no direction)."""
+  arg_checks.check_real_dtype("xi", xi)
   xi = np.asarray(xi, np.float64)
+  arg_checks.check_finite("xi", xi)
+  arg_checks.check_float("norm", norm, above=0.0)
   length = float(np.linalg.norm(xi))
   if not length > 0.0:
     raise ValueError("a zero light has no direction to scale to the common norm")
@@ -84,6 +89,8 @@ def num_coefficients_of(degree):
 
 def degree_of(n):
   """SH degree l of n = (l + 1)^2 coefficients."""
+  if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
+    raise ValueError(f"an SH light has 1, 4, 9 or 16 coefficients, got {n!r}")
   degree = math.isqrt(int(n)) - 1
   if (degree + 1) ** 2 != n or not 0 <= degree <= 3:
     raise ValueError(f"an SH light has 1, 4, 9 or 16 coefficients, got {n}")
@@ -182,8 +189,24 @@ def held_out_lights(n, *, num_environments, num_random, seed, power=1.0, sharpne
   the total power of `power` times the uniform light.
 
   Returns:
-    (lights [K, n], kinds: K strings "environment" or "random").
+    (lights [K, n], kinds: K strings "environment" or "random"), K = num_environments +
+    num_random >= 1.
   """
+  degree_of(n)
+  counts = [arg_checks.check_int(name, value, minimum=0) for name, value in
+            (("num_environments", num_environments), ("num_random", num_random))]
+  if sum(counts) < 1:
+    raise ValueError("held_out_lights needs num_environments + num_random >= 1, got 0")
+  arg_checks.check_seed("seed", seed)
+  arg_checks.check_float("power", power, above=0.0)
+  if len(sharpness) != 2:
+    raise ValueError(f"sharpness must be (low, high), got {sharpness!r}")
+  low = arg_checks.check_float("sharpness[0]", sharpness[0], above=0.0)
+  arg_checks.check_float("sharpness[1]", sharpness[1], minimum=low)
+  if len(grid) != 2:
+    raise ValueError(f"grid must be (height, width), got {grid!r}")
+  for name, value in zip(("grid[0]", "grid[1]"), grid, strict=True):
+    arg_checks.check_int(name, value, minimum=1)
   rng = np.random.default_rng([int(seed), 39])
   dirs, weights = direction_grid(*grid)
   lights, kinds = [], []

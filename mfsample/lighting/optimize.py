@@ -25,11 +25,13 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
+from mfsample import arg_checks
 from mfsample.lighting import lights as lights_lib
 from mfsample.lighting import uncertainty as lu
 from mfsample.renderer.budget import BudgetExceededError
 from mfsample.renderer.settings import RenderSettings
 from mfsample.sharding import default_num_devices
+from mfsample.uncertainty import check_z
 
 
 @dataclasses.dataclass(frozen=True)
@@ -49,9 +51,10 @@ class AscentSettings:
   norm: float = lights_lib.UNIFORM_NORM
 
   def __post_init__(self):
-    if self.steps < 1 or not self.lr > 0 or not 0 < self.final_lr <= self.lr or self.norm <= 0:
-      raise ValueError(f"AscentSettings need steps >= 1, 0 < final_lr <= lr and norm > 0, "
-                       f"got {self}")
+    arg_checks.check_int("AscentSettings.steps", self.steps, minimum=1)
+    arg_checks.check_float("AscentSettings.lr", self.lr, above=0.0)
+    arg_checks.check_float("AscentSettings.final_lr", self.final_lr, above=0.0, maximum=self.lr)
+    arg_checks.check_float("AscentSettings.norm", self.norm, above=0.0)
 
 
 class AscentResult(NamedTuple):
@@ -119,6 +122,8 @@ def ascend(model, cameras, z, xi0, *, opt: AscentSettings, settings: RenderSetti
     `AscentResult`.
   """
   _, n = lu._check_model(model)
+  lu.check_cameras(cameras)
+  check_z(model, z, sync=True)  # called once, it syncs anyway
   xi0 = lights_lib.on_sphere(lights_lib.check_light(xi0, n, "xi0"), opt.norm)
   dtype = model.params.mean["means"].dtype
   num_devices = default_num_devices(cameras.batch_shape[0])

@@ -29,14 +29,15 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from mfsample import samplers
+from mfsample import arg_checks, samplers
+from mfsample.camera import Camera
 from mfsample.lighting import field
 from mfsample.lighting import lights as lights_lib
 from mfsample.renderer.budget import render_with_budget
 from mfsample.renderer.settings import RenderSettings
 from mfsample.renderer.tiles import TileStats
 from mfsample.sharding import default_num_devices, map_cameras
-from mfsample.uncertainty import pixel_variance
+from mfsample.uncertainty import check_z, pixel_variance
 
 
 class LightUncertainty(NamedTuple):
@@ -76,14 +77,29 @@ def _check_model(model):
   return field.coefficient_counts(model)
 
 
+def check_cameras(cameras):
+  if not isinstance(cameras, Camera) or len(cameras.batch_shape) != 1:
+    raise ValueError("cameras must be a Camera batched over one axis [B], got "
+                     + (f"batch shape {cameras.batch_shape}" if isinstance(cameras, Camera)
+                        else type(cameras).__name__))
+
+
 def _check_xi(xi, n):
-  """Shape check always; finiteness only for concrete values (not under jit or grad)."""
+  """Shape check always; finiteness only for concrete values (not under jit or grad: there a
+  non-finite light gives NaN, `_nan_unless_finite`)."""
   if isinstance(xi, jax.core.Tracer):
     if tuple(xi.shape) != (n,):
       raise ValueError(f"xi must be one SH light of {n} coefficients (shape [{n}]), got "
                        f"shape {list(xi.shape)}")
     return xi
   return jnp.asarray(lights_lib.check_light(xi, n))
+
+
+def _nan_unless_finite(x, *inputs):
+  """x, or NaN when an input is not finite. A NaN light (or z) makes every Gaussian's
+  radiance non-finite; the renderer culls them, and without this U would be exactly 0."""
+  ok = functools.reduce(jnp.logical_and, [arg_checks.all_finite(v) for v in inputs])
+  return arg_checks.nan_unless(ok, x)
 
 
 @functools.partial(jax.jit, static_argnames=("settings", "num_devices"))
@@ -100,6 +116,7 @@ def _light_uncertainty(model, cameras, z, xi, *, settings, num_devices):
     return jnp.sum(pixel_variance(rgbs)), stats
 
   values, stats = map_cameras(one, cameras, raw_m, num_devices=num_devices)
+  values = _nan_unless_finite(values, xi, z)
   return LightUncertainty(jnp.sum(values), values, stats)
 
 
@@ -121,6 +138,10 @@ def light_uncertainty(model, cameras, z, xi, *, settings: RenderSettings, num_de
     `LightUncertainty`.
   """
   _, n = _check_model(model)
+  check_cameras(cameras)
+  check_z(model, z)
+  num_devices = arg_checks.check_int("num_devices", num_devices, minimum=1,
+                                     maximum=jax.device_count())
   return _light_uncertainty(model, cameras, z, _check_xi(xi, n), settings=settings,
                             num_devices=num_devices)
 
@@ -131,6 +152,7 @@ def light_pixel_map(model, camera, z, xi, *, settings: RenderSettings):
   the variance over the M samples of the radiance under xi, summed over RGB (the uncertainty
   image of Eq. 10 under the light xi; its sum is that camera's share of U(xi))."""
   _, n = _check_model(model)
+  check_z(model, z)
   xi = _check_xi(xi, n).astype(model.params.mean["means"].dtype)
 
   def sample(raw):
@@ -138,7 +160,8 @@ def light_pixel_map(model, camera, z, xi, *, settings: RenderSettings):
     return out.rgb, out.stats
 
   rgbs, stats = jax.lax.map(sample, sample_raw(model, z))
-  return pixel_variance(rgbs), jnp.mean(rgbs, axis=0), stats
+  return (_nan_unless_finite(pixel_variance(rgbs), xi, z),
+          _nan_unless_finite(jnp.mean(rgbs, axis=0), xi, z), stats)
 
 
 def light_uncertainty_fitted(model, cameras, z, xi, *, settings: RenderSettings,
@@ -146,6 +169,9 @@ def light_uncertainty_fitted(model, cameras, z, xi, *, settings: RenderSettings,
   """(`LightUncertainty`, settings that sufficed): `light_uncertainty` with the budget grown
   until no render overflows (never a truncated image)."""
   _, n = _check_model(model)
+  check_cameras(cameras)
+  check_z(model, z)
+  max_budget = arg_checks.check_int("max_budget", max_budget, minimum=1)
   xi = _check_xi(xi, n)
   return render_with_budget(_light_uncertainty, settings, model, cameras, z, xi,
                             num_devices=default_num_devices(cameras.batch_shape[0]),
@@ -166,6 +192,7 @@ def _light_gram(model, cameras, z, *, settings, num_devices):
     return jnp.einsum("mhwbc,mhwdc->bd", d, d) / images.shape[0], stats
 
   per_camera, stats = map_cameras(one, cameras, raw_m, num_devices=num_devices)
+  per_camera = _nan_unless_finite(per_camera, z)
   q = jnp.sum(per_camera, axis=0)
   return LightGram(0.5 * (q + q.T), per_camera, stats)
 
@@ -186,20 +213,45 @@ def light_gram(model, cameras, z, *, settings: RenderSettings, max_budget=1 << 2
     (`LightGram`, the settings that sufficed).
   """
   _check_model(model)
+  check_cameras(cameras)
+  check_z(model, z)
+  max_budget = arg_checks.check_int("max_budget", max_budget, minimum=1)
   if num_devices is None:
     num_devices = default_num_devices(cameras.batch_shape[0])
+  num_devices = arg_checks.check_int("num_devices", num_devices, minimum=1,
+                                     maximum=jax.device_count())
   return render_with_budget(_light_gram, settings, model, cameras, z, num_devices=num_devices,
                             max_budget=max_budget, what="light Gram matrix")
 
 
+def check_q(q, name="q"):
+  """Q as float64 [n, n]: square, finite and symmetric (relative 1e-6; `light_gram` returns it
+  exactly symmetric). ValueError naming `name` otherwise: `eigh` would read one triangle of a
+  non-symmetric matrix and silently ignore the other."""
+  arg_checks.check_real_dtype(name, q)
+  q = np.asarray(q, np.float64)
+  if q.ndim != 2 or q.shape[0] != q.shape[1] or q.shape[0] < 1:
+    raise ValueError(f"{name} must be a square [n, n] matrix, got shape {list(q.shape)}")
+  arg_checks.check_finite(name, q)
+  asym = float(np.max(np.abs(q - q.T)))
+  if asym > 1e-6 * max(float(np.max(np.abs(q))), 1e-30):
+    raise ValueError(f"{name} must be symmetric (U(xi) = xi^T Q xi), got max |Q - Q^T| = "
+                     f"{asym:.3g}")
+  return q
+
+
 def quadratic_u(q, lights):
   """U of each light from Q: [..., n] -> [...] (xi^T Q xi, float64 numpy)."""
-  q = np.asarray(q, np.float64)
+  q = check_q(q)
+  arg_checks.check_real_dtype("lights", lights)
   lights = np.asarray(lights, np.float64)
+  if lights.ndim < 1 or lights.shape[-1] != q.shape[0]:
+    raise ValueError(f"lights must have shape [..., {q.shape[0]}] (the n of q), got "
+                     f"{list(lights.shape)}")
   return np.einsum("...i,ij,...j->...", lights, q, lights)
 
 
 def top_eigen(q):
   """(largest eigenvalue, its unit eigenvector [n]) of the symmetric Q (float64 numpy)."""
-  values, vectors = np.linalg.eigh(np.asarray(q, np.float64))
+  values, vectors = np.linalg.eigh(check_q(q))
   return float(values[-1]), vectors[:, -1]

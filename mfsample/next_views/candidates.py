@@ -11,6 +11,7 @@ camera's.
 import jax.numpy as jnp
 import numpy as np
 
+from mfsample import arg_checks
 from mfsample.camera import Camera
 
 
@@ -35,8 +36,16 @@ def sphere_candidates(cameras: Camera, center, num):
   Returns:
     a `Camera` batched over [num] with the first training camera's intrinsics.
   """
+  if not isinstance(cameras, Camera):
+    raise ValueError(f"cameras must be a Camera, got {type(cameras).__name__}")
+  arg_checks.check_shape("center", center, (3,))
   center = np.asarray(center, np.float64)
+  arg_checks.check_finite("center", center)
+  arg_checks.check_int("num", num, minimum=1)
   centers = np.asarray(cameras.center, np.float64).reshape(-1, 3) - center
+  if np.any(np.linalg.norm(centers, axis=-1) == 0.0):
+    raise ValueError("a training camera sits at `center`: the candidates' sphere needs "
+                     "cameras around the point they look at")
   radius = float(np.mean(np.linalg.norm(centers, axis=-1)))
   up = capture_up(cameras)
   # An orthonormal frame (e1, e2, up) and the polar band of the training cameras.
@@ -62,7 +71,21 @@ def sphere_candidates(cameras: Camera, center, num):
 
 
 def top_k(values, k):
-  """Indices of the k largest `values`, largest first (ties: the lower index first)."""
+  """Indices of the k largest `values` [B], largest first (ties: the lower index first); all
+  B of them when k > B.
+
+  Raises:
+    ValueError: k is not an integer >= 0, `values` is not one axis of real numbers, or a
+      value is NaN (an unknown score, e.g. U of an invalid camera, cannot be ranked).
+  """
+  k = arg_checks.check_int("k", k, minimum=0)
+  arg_checks.check_real_dtype("values", values)
   values = np.asarray(values, np.float64)
+  if values.ndim != 1:
+    raise ValueError(f"values must have shape [B], got {list(values.shape)}")
+  nan = np.flatnonzero(np.isnan(values))
+  if nan.size:
+    raise ValueError(f"values[{int(nan[0])}] is NaN ({nan.size} of {values.size}): a score "
+                     "that is not a number cannot be ranked")
   order = np.lexsort((np.arange(len(values)), -values))
-  return order[:min(int(k), len(values))]
+  return order[:min(k, len(values))]

@@ -28,11 +28,18 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
+from mfsample import arg_checks
+from mfsample.camera import Camera
 from mfsample.planning import poses
 from mfsample.renderer.budget import render_with_budget
 from mfsample.renderer.settings import RenderSettings
 from mfsample.sharding import default_num_devices
-from mfsample.uncertainty import sample_gaussians, uncertainty_of_samples
+from mfsample.uncertainty import (
+    check_background,
+    check_z,
+    sample_gaussians,
+    uncertainty_of_samples,
+)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -57,6 +64,16 @@ class OptimizeSettings:
   resample_z: bool = False
   se3_lr_rotation: float = 2e-3
   se3_lr_translation: float = 5e-3
+
+  def __post_init__(self):
+    arg_checks.check_int("OptimizeSettings.steps", self.steps, minimum=1)
+    arg_checks.check_int("OptimizeSettings.z_drop_step", self.z_drop_step, minimum=0)
+    arg_checks.check_float("OptimizeSettings.z_drop_scale", self.z_drop_scale, minimum=0.0)
+    for name in ("lr", "se3_lr_rotation", "se3_lr_translation"):
+      arg_checks.check_float(f"OptimizeSettings.{name}", getattr(self, name), above=0.0)
+    if not isinstance(self.resample_z, bool):
+      raise ValueError(f"OptimizeSettings.resample_z must be True or False, got "
+                       f"{self.resample_z!r}")
 
 
 class OptimizeResult(NamedTuple):
@@ -163,6 +180,18 @@ class _Overflow(NamedTuple):
   overflow: chex.Array
 
 
+def _check_common(model, z, background, num_devices, max_budget):
+  """(background [3], number of devices) after checking the arguments both optimisers take."""
+  check_z(model, z, sync=True)  # called once, it syncs anyway
+  check_background(background)
+  arg_checks.check_int("max_budget", max_budget, minimum=1)
+  dtype = model.params.mean["means"].dtype
+  background = jnp.zeros((3,), dtype) if background is None else jnp.asarray(background, dtype)
+  n = default_num_devices(z.shape[0]) if num_devices is None else num_devices
+  return background, arg_checks.check_int("num_devices", n, minimum=1,
+                                          maximum=jax.device_count())
+
+
 def optimize_spherical(model, uv0, z, *, sphere: poses.SphereSpec, opt=OptimizeSettings(),
                        settings: RenderSettings = RenderSettings(), background=None,
                        num_devices=None, max_budget=1 << 24, key=None) -> OptimizeResult:
@@ -185,10 +214,11 @@ def optimize_spherical(model, uv0, z, *, sphere: poses.SphereSpec, opt=OptimizeS
   Returns:
     `OptimizeResult`.
   """
+  arg_checks.check_shape("uv0", uv0, (2,))
+  arg_checks.check_finite("uv0", uv0)
+  background, n = _check_common(model, z, background, num_devices, max_budget)
   dtype = model.params.mean["means"].dtype
-  background = jnp.zeros((3,), dtype) if background is None else jnp.asarray(background, dtype)
   uv0 = poses.project_uv(jnp.asarray(uv0, dtype), sphere)
-  n = default_num_devices(z.shape[0]) if num_devices is None else int(num_devices)
   (params, values, traj), settings = _with_budget(
       lambda s: _spherical(model, uv0, z, _key(opt, key), background, sphere=sphere, opt=opt,
                            settings=s, num_devices=n), settings, max_budget)
@@ -206,9 +236,11 @@ def optimize_se3(model, camera0, z, *, opt=OptimizeSettings(),
   Returns:
     `OptimizeResult` with params = xi [6] and camera = perturb_camera(camera0, xi).
   """
-  dtype = model.params.mean["means"].dtype
-  background = jnp.zeros((3,), dtype) if background is None else jnp.asarray(background, dtype)
-  n = default_num_devices(z.shape[0]) if num_devices is None else int(num_devices)
+  if not isinstance(camera0, Camera) or camera0.batch_shape:
+    raise ValueError("camera0 must be one unbatched Camera, got "
+                     + (f"a batch {camera0.batch_shape}" if isinstance(camera0, Camera)
+                        else type(camera0).__name__))
+  background, n = _check_common(model, z, background, num_devices, max_budget)
   (params, values, traj), settings = _with_budget(
       lambda s: _se3(model, camera0, z, _key(opt, key), background, opt=opt, settings=s,
                      num_devices=n), settings, max_budget)

@@ -28,6 +28,7 @@ import math
 import jax.numpy as jnp
 import numpy as np
 
+from mfsample import arg_checks
 from mfsample.camera import Camera
 
 _UP = (0.0, 0.0, 1.0)
@@ -53,11 +54,19 @@ class SphereSpec:
   height: int = 64
 
   def __post_init__(self):
+    if len(self.v_range) != 2:
+      raise ValueError(f"SphereSpec.v_range must be (v_min, v_max), got {self.v_range!r}")
     lo, hi = self.v_range
     if not 0.0 <= lo < hi <= 1.0:
       raise ValueError(f"v_range must satisfy 0 <= v_min < v_max <= 1, got {self.v_range}")
-    if self.radius <= 0:
-      raise ValueError(f"radius must be > 0, got {self.radius}")
+    arg_checks.check_float("SphereSpec.radius", self.radius, above=0.0)
+    if len(self.center) != 3:
+      raise ValueError(f"SphereSpec.center must be 3 numbers, got {self.center!r}")
+    for i, c in enumerate(self.center):
+      arg_checks.check_float(f"SphereSpec.center[{i}]", c)
+    arg_checks.check_float("SphereSpec.fov_x", self.fov_x, above=0.0, below=math.pi)
+    arg_checks.check_int("SphereSpec.width", self.width, minimum=1)
+    arg_checks.check_int("SphereSpec.height", self.height, minimum=1)
 
   @classmethod
   def from_scene(cls, scene, width, height):
@@ -104,6 +113,7 @@ def spherical_camera(uv, sphere: SphereSpec) -> Camera:
   Differentiable w.r.t. `uv`. Batched like `uv`'s leading axes.
   """
   uv = jnp.asarray(uv)
+  _check_last_axis("uv", uv, 2)
   if not jnp.issubdtype(uv.dtype, jnp.floating):
     uv = uv.astype(jnp.float32)
   center = jnp.asarray(sphere.center, uv.dtype)
@@ -115,6 +125,8 @@ def spherical_camera(uv, sphere: SphereSpec) -> Camera:
 
 def camera_to_uv(camera: Camera, center=(0.0, 0.0, 0.0)):
   """[..., 2] (u, v) of camera centres around `center` (numpy, u in [0, 1))."""
+  arg_checks.check_shape("center", center, (3,))
+  arg_checks.check_finite("center", np.asarray(center, np.float64))
   d = np.asarray(camera.center, np.float64) - np.asarray(center, np.float64)
   dist = np.linalg.norm(d, axis=-1)
   polar = np.arccos(np.clip(d[..., 2] / np.maximum(dist, 1e-12), -1.0, 1.0))
@@ -132,6 +144,7 @@ def angle_to_nearest(cameras: Camera, indices, center=(0.0, 0.0, 0.0)):
 
 def project_uv(uv, sphere: SphereSpec):
   """Wraps u to [0, 1) and clamps v to `sphere.v_range` (applied after every step)."""
+  _check_last_axis("uv", uv, 2)
   u = jnp.mod(uv[..., 0], 1.0)
   v = jnp.clip(uv[..., 1], *sphere.v_range)
   return jnp.stack([u, v], axis=-1)
@@ -193,6 +206,7 @@ def so3_exp(omega):
 
 def se3_exp(xi):
   """[..., 6] tangent vector (omega [3], rho [3]) -> [..., 4, 4] rigid transform exp(xi^)."""
+  _check_last_axis("xi", xi, 6)
   omega, rho = xi[..., :3], xi[..., 3:]
   w = hat(omega)
   a, b, c = _exp_coefficients(jnp.sum(omega * omega, axis=-1))
@@ -212,9 +226,18 @@ def perturb_camera(camera: Camera, xi) -> Camera:
   Intrinsics and image size are unchanged; differentiable w.r.t. `xi` and the camera.
   """
   w2c = camera.world_to_camera
-  motion = se3_exp(jnp.asarray(xi, w2c.dtype))
+  xi = jnp.asarray(xi, w2c.dtype)
+  if xi.shape != camera.batch_shape + (6,):
+    raise ValueError(f"xi must have shape {list(camera.batch_shape) + [6]} (one tangent vector "
+                     f"per camera), got {list(xi.shape)}")
+  motion = se3_exp(xi)
   return Camera(motion @ w2c, camera.fx, camera.fy, camera.cx, camera.cy, camera.width,
                 camera.height)
+
+
+def _check_last_axis(name, x, size):
+  if np.ndim(x) < 1 or np.shape(x)[-1] != size:
+    raise ValueError(f"{name} must have shape [..., {size}], got {list(np.shape(x))}")
 
 
 def downscale_camera(camera: Camera, factor) -> Camera:

@@ -10,6 +10,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from mfsample import arg_checks
 from mfsample.renderer.settings import RenderSettings
 
 
@@ -53,6 +54,7 @@ def render_with_budget(render_fn, settings: RenderSettings, *args, max_budget=1 
   Returns:
     (output, settings) with the settings that sufficed, to reuse on the next call.
   """
+  arg_checks.check_int("max_budget", max_budget, minimum=1)
   while True:
     out = render_fn(*args, settings=settings, **kwargs)
     stats = stats_of(out)

@@ -96,7 +96,9 @@ def render(gaussians: Gaussians, camera: Camera, *, background=None,
       raise ValueError(f"features must be floating point, got {features.dtype}")
   if screen_offset is not None:
     screen_offset = jnp.asarray(screen_offset)
-    chex.assert_shape(screen_offset, (n, 2))
+    if screen_offset.shape != (n, 2):
+      raise ValueError(f"screen_offset must have shape [N={n}, 2], got "
+                       f"{list(screen_offset.shape)}")
   if n == 0:  # one masked placeholder keeps every array non-empty
     gaussians = Gaussians.empty(1, gaussians.sh_degree, dtype)
     if features is not None:
@@ -118,7 +120,10 @@ def render(gaussians: Gaussians, camera: Camera, *, background=None,
   if background is None:
     background = jnp.zeros((num_channels,), dtype)
   background = jnp.asarray(background, dtype)
-  chex.assert_shape(background, (num_channels,))
+  if background.shape != (num_channels,):
+    raise ValueError(f"background must have shape [{num_channels}] (one value per channel of "
+                     f"{'features' if features is not None else 'the RGB colour'}), got "
+                     f"{list(background.shape)}")
 
   means2d = proj.means2d
   if screen_offset is not None:

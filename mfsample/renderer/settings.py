@@ -2,6 +2,8 @@
 
 import dataclasses
 
+from mfsample import arg_checks
+
 COMPOSITORS = ("jnp", "pallas")
 SEARCHSORTED_METHODS = ("scan", "scan_unrolled", "sort", "compare_all")
 
@@ -62,6 +64,13 @@ class RenderSettings:
   searchsorted_method: str = "scan"
 
   def __post_init__(self):
+    # Types and finiteness first: NaN passes every comparison below unnoticed (a NaN
+    # radius_sigma renders nothing), and a float size fails deep inside jit.
+    for name in ("tile_size", "max_intersections", "chunk_size", "chunks_per_step"):
+      arg_checks.check_int(f"RenderSettings.{name}", getattr(self, name))
+    for name in ("alpha_max", "alpha_min", "transmittance_min", "near_plane", "eps2d",
+                 "radius_sigma"):
+      arg_checks.check_float(f"RenderSettings.{name}", getattr(self, name))
     if self.tile_size < 1:
       raise ValueError(f"tile_size must be >= 1, got {self.tile_size}")
     if not 0.0 < self.alpha_max <= 1.0:
