@@ -673,7 +673,7 @@ def _tree_files(root):
 
 @pytest.mark.parametrize("case, error, message", [
     ("different config", WorkdirError,
-     r"holds checkpoints or results made with a different config \(differences: "
+     r"holds training results made with a different config \(differences: "
      r"loss.ssim_weight, sampler.rank\)"),
     ("empty config.json", WorkdirError, r"config.json is unreadable"),
     ("config.json not an object", WorkdirError, "does not hold a JSON object"),

@@ -286,6 +286,12 @@ def test_protocol_runs_end_to_end_and_resumes(tmp_path):
       assert rec["indices"][1:] == [None, None]  # captured new poses
     else:
       assert len(set(rec["indices"])) == config.max_views  # no candidate twice
+    # Its views in viewers' formats: nerfstudio reads them back at the record's poses.
+    from mfsample.data import load_nerfstudio
+    views, _ = load_nerfstudio(tmp_path / "views" / f"{rec['strategy']}-seed0")
+    np.testing.assert_allclose(views.cameras.world_to_camera, rec["world_to_camera"],
+                               atol=1e-6)
+    assert (tmp_path / "views" / f"{rec['strategy']}-seed0" / "cameras.json").exists()
   table = (tmp_path / "table.md").read_text()
   assert "Ours (Opt. Rnd.)" in table and "PSNR↑ (3 views)" in table
   assert "seconds per run" in table and set(results["run_seconds"]) == set(config.strategies)

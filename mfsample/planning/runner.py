@@ -331,6 +331,18 @@ def plan_views(strategy, pool: Pool, config, seed, trainer: Trainer, budgets=Bud
   return selected, budgets
 
 
+def export_views(directory, selected):
+  """A run's views as files viewers and capture tools read (`data.camera_export`: nerfstudio
+  transforms.json and camera_path.json, the 3DGS cameras.json, COLMAP text), with the image
+  captured at each (`images/`), in the order they were chosen."""
+  from mfsample.data.camera_export import export_cameras
+
+  names = [f"{i:02d}_" + (f"candidate_{s.index}" if s.index is not None else "new_pose")
+           for i, s in enumerate(selected)]
+  return export_cameras(directory, stack_cameras([s.camera for s in selected]), names,
+                        images=np.stack([s.image for s in selected]))
+
+
 def run_name(strategy, seed):
   """A run's file name in `runs/` (without `.json`)."""
   return f"{strategy}-seed{seed}"
@@ -390,7 +402,8 @@ def run_camera_planning(config, workdir):
   """Runs the protocol for every seed and strategy of `config`; writes and returns results.
 
   Writes to `workdir`: `runs/<strategy>-seed<seed>.json` (as each finishes; existing ones
-  are loaded, not recomputed, and a damaged one is reported and recomputed), `results.json`,
+  are loaded, not recomputed, and a damaged one is reported and recomputed) with its views
+  in viewers' formats in `views/<strategy>-seed<seed>/` (`export_views`), `results.json`,
   `table.md`, `cameras.png`, `landscape.png` (+ `landscape.npz`) and `config.json`, each
   atomically. An invalid config (`mfsample.planning.config.validate`) and a workdir whose
   finished runs used another protocol are refused before anything is written (`JOB`).
@@ -444,7 +457,8 @@ def run_camera_planning(config, workdir):
         bar.update(1)
       record = run_record(strategy, seed, selected, metrics, time.perf_counter() - t_run,
                           pool)
-      wd.write_json(entry, record)
+      export_views(wd.file("views", run_name(name, seed)), selected)
+      wd.write_json(entry, record)  # after its views: marks the run done
       records.append(record)
     bar.close()
 
