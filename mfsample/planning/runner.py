@@ -45,6 +45,7 @@ from mfsample.planning.config import validate
 from mfsample.planning.pool import Pool, make_pool, stack_cameras
 from mfsample.renderer import render
 from mfsample.renderer.budget import render_with_budget
+from mfsample.viewer.rounds import record_rounds
 
 
 class Selected(NamedTuple):
@@ -461,7 +462,7 @@ def run_camera_planning(config, workdir):
         records.append(json.load(f))
       bar.update(rounds + len(eval_views))
       continue
-    strategy = strategies.make_strategy(name, config)
+    strategy = record_rounds(strategies.make_strategy(name, config), workdir, config, seed)
     bar.set_postfix_str(f"{strategy.label}, seed {seed}")
     t_run = time.perf_counter()
     selected = plan_views(strategy, pool, config, seed, trainer, budgets,
