@@ -30,6 +30,10 @@ TRAIN_COLOUR = (60, 60, 60)
 UNSCORED_COLOUR = (170, 170, 170)
 NEXT_COLOUR = (230, 30, 30)
 COLORMAP = "viridis"
+# Splat colourings: label -> field of `gaussian_uncertainty.GaussianUncertainty` (None: the
+# model's own colour).
+SPLAT_COLOURS = {"model colour": None, "share of U": "share",
+                 "position std": "position_std", "colour std": "colour_std"}
 PANEL_PIXELS = 192  # renders and maps are enlarged to this width in the panel
 
 
@@ -96,6 +100,7 @@ class Frame:
   centre: np.ndarray
   radius: float
   up: np.ndarray
+  view_distance: float = 0.0  # of a new client's camera from the centre (0: 2.2 radius)
 
 
 def scene_frame(step, model=None):
@@ -159,6 +164,7 @@ class Viewer:
     self.frame = None
     self.cameras = {}  # camera choice label -> (group, index)
     self.renderer = models.Renderer()
+    self.gaussian_cache = {}
     self.lock = threading.RLock()
     self._build_panel()
     server.on_client_connect(self._on_connect)
@@ -172,6 +178,11 @@ class Viewer:
     self.step_dropdown = gui.add_dropdown("step", ("(none yet)",))
     self.follow = gui.add_checkbox("follow the run", True,
                                    hint="show the newest step as the job writes it")
+    self.splat_colour = gui.add_dropdown(
+        "splat colour", tuple(SPLAT_COLOURS),
+        hint="colour the Gaussians by their own colour or by their uncertainty "
+             "(mfsample.gaussian_uncertainty)")
+    self.splat_label = gui.add_markdown("")
     self.note = gui.add_markdown("")
     self.bar_label = gui.add_markdown("")
     self.bar = gui.add_image(colour_bar(), label=None)
@@ -192,6 +203,12 @@ class Viewer:
     def _(_):
       self.show_camera(self.camera_dropdown.value)
 
+    @self.splat_colour.on_update
+    def _(_):
+      with self.lock:
+        if self.step is not None:
+          self._draw_splats(self.step, self.run.model(self.step))
+
   def _on_connect(self, client):
     frame = self.frame
     if frame is None:
@@ -200,7 +217,8 @@ class Viewer:
     direction -= frame.up * (direction @ frame.up) - frame.up * 0.9
     direction /= np.linalg.norm(direction)
     client.camera.up_direction = tuple(frame.up)
-    client.camera.position = tuple(frame.centre + direction * frame.radius * 2.2)
+    distance = frame.view_distance or 2.2 * frame.radius
+    client.camera.position = tuple(frame.centre + direction * distance)
     client.camera.look_at = tuple(frame.centre)
 
   # ---------------------------------------------------------------- following the run
@@ -256,17 +274,51 @@ class Viewer:
     return handle
 
   def _draw_splats(self, step, model):
-    key = (step.model_path, step.signature, self._light_key(step))
+    colouring = self.splat_colour.value
+    key = (step.model_path, step.signature, self._light_key(step), colouring)
     if key == self.splat_key and "/splats" in self.handles:
       return
+    self.splat_label.content = ""
     if model is None or not np.any(models.live(model)):
       return
+    relightable = models.is_relightable(model)
+    self.splat_colour.disabled = relightable  # per-Gaussian U is defined for SH colour
     eye = self.frame.centre + self.frame.up * self.frame.radius
     light = self.run.light_of(step) if hasattr(self.run, "light_of") else None
     centres, cov, rgb, opacity = models.splats(model, eye, light)
+    if SPLAT_COLOURS[colouring] and not relightable:
+      values = self._per_gaussian(step, model)
+      if values is not None:
+        values = np.asarray(getattr(values, SPLAT_COLOURS[colouring]))[models.live(model)]
+        hi = float(np.percentile(values, 99)) if values.size else 0.0
+        rgb = colormap(values, 0.0, hi if hi > 0 else 1.0).astype(np.float32) / 255.0
+        self.splat_label.content = (f"splats coloured by {colouring}: 0 (left) to {hi:.3g} "
+                                    "(right; the top 1% at the right end)")
+    if "/splats" in self.handles:
+      self.handles.pop("/splats").remove()
     self._add("/splats", self.server.scene.add_gaussian_splats(
         "/splats", centers=centres, covariances=cov, rgbs=rgb, opacities=opacity))
     self.splat_key = key
+
+  def _per_gaussian(self, step, model):
+    """`GaussianUncertainty` of the step's model over the views it scores (the candidates,
+    else the training views), at the job's scoring size; computed once per step."""
+    from mfsample.gaussian_uncertainty import gaussian_uncertainty
+    from mfsample.planning.poses import downscale_camera
+
+    key = (step.model_path, step.signature)
+    if key not in self.gaussian_cache:
+      group = step.candidates if step.candidates is not None else step.train
+      if group is None:
+        return None
+      self.splat_label.content = (f"computing each Gaussian's uncertainty over "
+                                  f"{len(group[1])} views…")
+      num, seed = self.run.u_samples()
+      cameras = downscale_camera(group[0], self.run.score_downscale())
+      self.gaussian_cache = {key: gaussian_uncertainty(
+          model, cameras, models.samples(model, num, seed), settings=self.renderer.settings,
+          background=np.asarray(self.run.background(), np.float32))}
+    return self.gaussian_cache[key]
 
   def _light_key(self, step):
     if not hasattr(self.run, "light_of"):
@@ -322,13 +374,14 @@ class Viewer:
     from mfsample.lighting.figures import u_over_directions
 
     radius = 1.4 * self.frame.radius
+    self.frame.view_distance = 2.4 * radius
     if step.q is not None:
       values, dirs = u_over_directions(step.q, lights_lib.UNIFORM_NORM, 32, 64)
       lo, hi = float(values.min()), float(values.max())
       self._add("/lights/sphere", self.server.scene.add_point_cloud(
           "/lights/sphere", points=(self.frame.centre + radius * dirs.reshape(-1, 3)
                                     ).astype(np.float32),
-          colors=colormap(values.ravel(), lo, hi), point_size=0.04 * self.frame.radius))
+          colors=colormap(values.ravel(), lo, hi), point_size=0.02 * self.frame.radius))
       self.bar_label.content = (f"sphere of light directions coloured by U of a point light "
                                 f"from there: {lo:.4g} (left) to {hi:.4g} (right)")
       self.bar.visible = self.bar_label.visible = True
@@ -370,7 +423,11 @@ class Viewer:
         label for label in labels if not label.startswith("next")]
     self.cameras = {label: self.cameras[label] for label in drawn}
     self.camera_dropdown.options = tuple(drawn) or ("(none)",)
-    if drawn:
+    if not drawn:
+      return
+    if self.camera_dropdown.value == drawn[0]:  # unchanged: viser calls no callback
+      self.show_camera(drawn[0])
+    else:
       self.camera_dropdown.value = drawn[0]
 
   def camera_of(self, step, group, index):
@@ -390,7 +447,7 @@ class Viewer:
       truth = self.run.ground_truth(step, group, index) if group != "next" else None
       text = [f"**{label}**"]
       if group == "candidates" and step.scores is not None:
-        text.append(f"{step.score_name} = {step.scores[int(index)]:.4g}")
+        text.append(f"{step.score_name} as the job scored it: {step.scores[int(index)]:.4g}")
       self.truth_image.visible = truth is not None
       if truth is not None:
         self.truth_image.image = enlarge(to_uint8(truth))
@@ -405,7 +462,8 @@ class Viewer:
         self.render_image.image = enlarge(to_uint8(rgb))
         self.u_image.image = enlarge(colormap(pmap, 0.0, hi if hi > 0 else 1.0))
         self.render_image.visible = self.u_image.visible = True
-        text.append(f"U of this view {u:.4g} (map: 0 to {hi:.3g})")
+        text.append(f"U of this view at {camera.width} x {camera.height}: {u:.4g} "
+                    f"(map: 0 to {hi:.3g})")
       self.camera_info.content = "  \n".join(text)
 
   def _render(self, step, model, camera):
@@ -456,3 +514,23 @@ def serve(workdir, host="127.0.0.1", port=8080, poll_seconds=2.0, on_start=print
     pass
   finally:
     viewer.server.stop()
+
+
+def screenshot(workdir, path, *, max_width=1100, size=(1280, 860), timeout=120.0):
+  """Saves a PNG of the viewer's page on `workdir` as headless Chromium shows it (the newest
+  step, its first proposal in the panel), and returns the `Viewer` (stopped).
+
+  Raises:
+    mfsample.viewer.browser.BrowserError: no Chromium, or the page did not load in time.
+  """
+  from mfsample.viewer.browser import Browser
+
+  viewer = start(workdir, port=0)
+  try:
+    with Browser(size=size, timeout=timeout) as browser:
+      browser.open(f"http://127.0.0.1:{viewer.server.get_port()}/")
+      browser.wait_for_text(viewer.step.title if viewer.step else "mfsample")
+      browser.screenshot(path, max_width=max_width)
+  finally:
+    viewer.server.stop()
+  return viewer

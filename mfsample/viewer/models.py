@@ -21,6 +21,7 @@ from mfsample import uncertainty as unc
 from mfsample.model import Model, Params, SamplerSpec, mean_gaussians
 from mfsample.renderer import sh as sh_lib
 from mfsample.renderer.budget import render_with_budget
+from mfsample.renderer.projection import covariance_3d
 from mfsample.renderer.settings import RenderSettings
 from mfsample.train import checkpoint as ckpt
 
@@ -89,24 +90,6 @@ def live(model):
   return np.asarray(model.mask, bool)
 
 
-def covariances(log_scales, quats):
-  """[N, 3, 3] world covariances R diag(s^2) R^T from raw log-scales and (w, x, y, z) quats.
-
-  A zero quaternion is the identity, as in the renderer.
-  """
-  q = np.asarray(quats, np.float64)
-  norm = np.linalg.norm(q, axis=-1, keepdims=True)
-  q = np.where(norm > 0, q / np.where(norm > 0, norm, 1.0), np.array([1.0, 0.0, 0.0, 0.0]))
-  w, x, y, z = np.moveaxis(q, -1, 0)
-  rot = np.stack([
-      np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
-      np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
-      np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
-  ], -2)
-  scales = np.exp(np.clip(np.asarray(log_scales, np.float64), -30.0, 10.0))
-  return np.einsum("nij,nj,nkj->nik", rot, scales ** 2, rot)
-
-
 def splat_colours(model, eye, light=None):
   """[N_live, 3] display colours of the live Gaussians seen from the point `eye` [3].
 
@@ -135,13 +118,19 @@ def splats(model, eye, light=None):
   """(centres [N, 3], covariances [N, 3, 3], rgbs [N, 3], opacities [N, 1]) of the live
   Gaussians of the mean model: what a splat scene node takes."""
   keep = live(model)
-  mean = model.params.mean
-  centres = np.asarray(mean["means"])[keep]
-  cov = covariances(np.asarray(mean["log_scales"])[keep], np.asarray(mean["quats"])[keep])
-  opacity = 1.0 / (1.0 + np.exp(-np.asarray(mean["opacity_logits"], np.float64)[keep]))
-  return (centres.astype(np.float32), cov.astype(np.float32),
+  g = activate_geometry(model)
+  cov = covariance_3d(g.scales, g.quats)  # the renderer's own: R diag(s^2) R^T
+  return (np.asarray(g.means)[keep].astype(np.float32), np.asarray(cov)[keep].astype(np.float32),
           splat_colours(model, eye, light).astype(np.float32),
-          opacity[:, None].astype(np.float32))
+          np.asarray(g.opacities)[keep, None].astype(np.float32))
+
+
+def activate_geometry(model):
+  """The mean model's `Gaussians` (SH colour or a relightable model's geometry alone)."""
+  if is_relightable(model):
+    from mfsample.lighting import field
+    return field.geometry(model.params.mean, model.mask)
+  return mean_gaussians(model)
 
 
 # ------------------------------------------------------------------ renders of one camera

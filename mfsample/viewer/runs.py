@@ -237,6 +237,10 @@ class Run:
   def background(self):
     return tuple(float(c) for c in self.config.data.get("background", (0.0, 0.0, 0.0)))
 
+  def score_downscale(self):
+    """The factor by which the job shrinks the candidates' images to score them."""
+    return 1
+
   def ground_truth(self, step, group, index):
     """[H, W, 3] the image the job holds for camera `index` of `group` ("train" or
     "candidates") of `step`, or None."""
@@ -280,6 +284,9 @@ class NextViewsRun(Run):
 
   def u_samples(self):
     return int(self.config.next_views.samples), int(self.config.next_views.z_seed)
+
+  def score_downscale(self):
+    return int(self.config.next_views.score_downscale)
 
   def steps(self):
     checkpoints = ckpt.list_checkpoints(self.path("checkpoints"))
@@ -357,6 +364,9 @@ class CameraPlanningRun(Run):
     ours = self.config.strategy.ours
     return int(ours.select_samples), int(ours.z_seed)
 
+  def score_downscale(self):
+    return int(self.config.strategy.ours.score_downscale)
+
   def _candidates(self):
     """(`Camera` [C], names) of the pool: from rounds/candidates.npz, else the inputs."""
     path = self.path(rounds.DIRECTORY, rounds.CANDIDATES)
@@ -427,7 +437,7 @@ class CameraPlanningRun(Run):
     score_name = "U" if name.startswith("ours") else f"{meta.get('label', name)} score"
     return Step(
         key=f"{name}-seed{seed}/{views}",
-        title=f"{meta.get('label', name)}, seed {seed}: round {views} ({views} views)",
+        title=_round_title(meta.get("label", name), seed, views),
         signature=(seed, name, views, _stat(path), candidates is not None),
         model_path=path if meta.get("model") else None, train=train,
         candidates=candidates, scores=None if scores is None else np.asarray(scores),
@@ -451,7 +461,7 @@ class CameraPlanningRun(Run):
                               indices[views], float(scores[views])),)
       out.append(Step(
           key=f"{name}-seed{seed}/{views}",
-          title=f"{record.get('label', name)}, seed {seed}: round {views} ({views} views)",
+          title=_round_title(record.get("label", name), seed, views),
           signature=(seed, name, views, _stat(path), candidates is not None), train=train,
           candidates=candidates, proposals=proposals or (), train_images=tuple(indices[:views]),
           note="from the finished run's record: no round model or candidate scores"))
@@ -463,6 +473,10 @@ class CameraPlanningRun(Run):
     if group == "train":
       index = step.train_images[int(index)] if step.train_images else None
     return None if index is None else self.inputs["candidate_images"][int(index)]
+
+
+def _round_title(label, seed, views):
+  return f"{label}, seed {seed}: view {views + 1} chosen on {views} view{'s' * (views > 1)}"
 
 
 # ------------------------------------------------------------------ light planning
