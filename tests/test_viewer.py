@@ -14,6 +14,7 @@ import time
 import jax
 import numpy as np
 import pytest
+from planning_testlib import random_model, tiny_config, tiny_pool
 
 from mfsample import workdir as workdir_lib
 from mfsample.planning import strategies
@@ -22,7 +23,6 @@ from mfsample.train import checkpoint as ckpt
 from mfsample.viewer import app, models, rounds
 from mfsample.viewer.browser import Browser, find_chromium
 from mfsample.viewer.runs import RunError, open_run
-from tests.planning_testlib import random_model, tiny_config, tiny_pool
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 

@@ -192,9 +192,19 @@ class Run:
     self.inputs = None
     self.inputs_error = ""
     self._models = {}
+    self._metas = {}
 
   def path(self, *parts):
     return os.path.join(self.workdir, *parts)
+
+  def read_meta(self, path):
+    """The metadata of a checkpoint or round file (`models.read_meta`), read again only when
+    the file changed: a poll of an unchanged workdir opens no archive."""
+    key = (path, _stat(path))
+    if key not in self._metas:
+      self._metas = {k: v for k, v in self._metas.items() if k[0] != path}
+      self._metas[key] = models.read_meta(path)
+    return self._metas[key]
 
   def load_inputs(self):
     """Rebuilds the job's cameras and images from `config.json` (once). On failure the
@@ -311,7 +321,7 @@ class NextViewsRun(Run):
       title = (f"next {len(proposals)} of {len(record['u'])} candidates"
                + (f" (model after {steps_done} steps)" if steps_done else ""))
     else:
-      meta = models.read_meta(latest) if latest else None
+      meta = self.read_meta(latest) if latest else None
       title = ("training: step " + str(meta["step"]) if meta else "training not started")
       title += " (no proposal yet)"
     if latest is None:
@@ -388,7 +398,7 @@ class CameraPlanningRun(Run):
     out = {}
     for directory in sorted(glob.glob(self.path(rounds.DIRECTORY, "*-seed*"))):
       for path in ckpt.list_checkpoints(directory):
-        meta = models.read_meta(path)
+        meta = self.read_meta(path)
         if meta is not None:
           step = self._round_step(path, meta, candidates)
           if step is not None:
@@ -529,7 +539,7 @@ class LightPlanningRun(Run):
       done_path = self.path("runs", f"{name}.json")
       record = read_json(done_path)
       running = ckpt.list_checkpoints(self.path("runs", name))
-      running_meta = models.read_meta(running[-1]) if running else None
+      running_meta = self.read_meta(running[-1]) if running else None
       if isinstance(record, dict):
         phases, source = record.get("phases", []), done_path
       elif running_meta is not None:
