@@ -34,7 +34,7 @@ COLORMAP = "viridis"
 # model's own colour).
 SPLAT_COLOURS = {"model colour": None, "share of U": "share",
                  "position std": "position_std", "colour std": "colour_std"}
-PANEL_PIXELS = 192  # renders and maps are enlarged to this width in the panel
+PANEL_PIXELS = 144  # renders and maps are enlarged to about this width in the panel
 
 
 class ViewerError(ValueError):
@@ -210,11 +210,16 @@ class Viewer:
           self._draw_splats(self.step, self.run.model(self.step))
 
   def _on_connect(self, client):
+    """Points a new client's camera at the scene, from above the first proposal (or from an
+    oblique side), so the proposal and its label face the viewer."""
     frame = self.frame
     if frame is None:
       return
-    direction = np.array([1.0, -1.2, 0.9])
-    direction -= frame.up * (direction @ frame.up) - frame.up * 0.9
+    direction = np.array([1.0, -1.2, 0.0])
+    if self.step is not None and self.step.proposals:
+      direction = camera_pose(self.step.proposals[0].camera)[1] - frame.centre
+    direction = direction - frame.up * (direction @ frame.up)
+    direction = direction / max(np.linalg.norm(direction), 1e-12) + 0.9 * frame.up
     direction /= np.linalg.norm(direction)
     client.camera.up_direction = tuple(frame.up)
     distance = frame.view_distance or 2.2 * frame.radius
@@ -335,7 +340,8 @@ class Viewer:
     return self._add(name, handle)
 
   def _draw_cameras(self, step):
-    scale = 0.12 * self.frame.radius
+    count = sum(len(g[1]) for g in (step.train, step.candidates) if g is not None)
+    scale = (0.12 if count <= 30 else 0.07) * self.frame.radius  # many cameras: smaller
     if step.train is not None:
       cams, names = step.train
       for i in range(len(names)):
@@ -367,7 +373,7 @@ class Viewer:
       _, position = camera_pose(p.camera)
       score = "" if p.score is None else f" ({step.score_name} {p.score:.4g})"
       self._add(f"{name}/label", self.server.scene.add_label(
-          f"{name}/label", f"next #{p.rank}: {p.name}{score}", position=(0.0, 0.0, 0.0)))
+          f"{name}/label", f"next #{p.rank}{score}", position=(0.0, 0.0, 0.0)))
 
   def _draw_lights(self, step):
     from mfsample.lighting import lights as lights_lib
@@ -381,7 +387,8 @@ class Viewer:
       self._add("/lights/sphere", self.server.scene.add_point_cloud(
           "/lights/sphere", points=(self.frame.centre + radius * dirs.reshape(-1, 3)
                                     ).astype(np.float32),
-          colors=colormap(values.ravel(), lo, hi), point_size=0.02 * self.frame.radius))
+          colors=colormap(values.ravel(), lo, hi), point_size=0.035 * self.frame.radius,
+          point_shape="circle"))
       self.bar_label.content = (f"sphere of light directions coloured by U of a point light "
                                 f"from there: {lo:.4g} (left) to {hi:.4g} (right)")
       self.bar.visible = self.bar_label.visible = True
@@ -393,9 +400,10 @@ class Viewer:
       chosen = step.next_light is not None and i == len(marked) - 1
       name = f"/lights/used/{i}"
       position = self.frame.centre + radius * 1.08 * brightest
-      self._add(name, self.server.scene.add_icosphere(
-          name, radius=0.06 * self.frame.radius,
-          color=NEXT_COLOUR if chosen else (250, 250, 250), position=tuple(position)))
+      self._add(name, self.server.scene.add_point_cloud(
+          name, points=np.zeros((1, 3), np.float32),
+          colors=NEXT_COLOUR if chosen else TRAIN_COLOUR, point_size=0.2 * self.frame.radius,
+          point_shape="circle", position=tuple(float(v) for v in position)))
       text = f"{'chosen: ' if chosen else ''}{label}"
       self._add(f"{name}/label", self.server.scene.add_label(f"{name}/label", text,
                                                              position=(0.0, 0.0, 0.0)))
@@ -516,9 +524,10 @@ def serve(workdir, host="127.0.0.1", port=8080, poll_seconds=2.0, on_start=print
     viewer.server.stop()
 
 
-def screenshot(workdir, path, *, max_width=1100, size=(1280, 860), timeout=120.0):
+def screenshot(workdir, path, *, max_width=1100, size=(1280, 860), timeout=120.0, settle=10.0):
   """Saves a PNG of the viewer's page on `workdir` as headless Chromium shows it (the newest
-  step, its first proposal in the panel), and returns the `Viewer` (stopped).
+  step, its first proposal in the panel), and returns the `Viewer` (stopped). viser fades new
+  objects in; with WebGL in software that takes seconds, hence `settle`.
 
   Raises:
     mfsample.viewer.browser.BrowserError: no Chromium, or the page did not load in time.
@@ -530,7 +539,7 @@ def screenshot(workdir, path, *, max_width=1100, size=(1280, 860), timeout=120.0
     with Browser(size=size, timeout=timeout) as browser:
       browser.open(f"http://127.0.0.1:{viewer.server.get_port()}/")
       browser.wait_for_text(viewer.step.title if viewer.step else "mfsample")
-      browser.screenshot(path, max_width=max_width)
+      browser.screenshot(path, max_width=max_width, settle=settle)
   finally:
     viewer.server.stop()
   return viewer
