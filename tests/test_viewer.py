@@ -204,3 +204,18 @@ def test_the_page_shows_the_plan_and_follows_the_run(planning_workdir, tmp_path)
   assert pixels.shape[:2] == (900, 1280) and pixels.std() > 10  # not a blank page
   print(f"browser test: {time.perf_counter() - t0:.1f} s, {time.process_time() - cpu0:.1f} s "
         "of this process's CPU time")
+
+
+@pytest.mark.slow
+def test_the_server_states_its_address_and_binds_to_this_machine(planning_workdir):
+  workdir = planning_workdir[0]
+  said = []
+
+  def on_start(message):  # what the command prints; then a Ctrl-C
+    said.append(message)
+    raise KeyboardInterrupt
+
+  app.serve(workdir, port=0, on_start=on_start)
+  (message,) = said
+  assert "camera planning" in message and "bound to 127.0.0.1" in message
+  assert int(message.split("http://localhost:")[1].split()[0]) > 0  # the port bound

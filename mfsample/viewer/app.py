@@ -512,9 +512,10 @@ def serve(workdir, host="127.0.0.1", port=8080, poll_seconds=2.0, on_start=print
   """`start`, then follows the run until interrupted (Ctrl-C)."""
   viewer = start(workdir, host, port)
   shown = "localhost" if host in ("127.0.0.1", "::1", "localhost") else host
-  on_start(f"mfsample viewer: {KINDS[viewer.run.kind]} in {workdir}\n"
-           f"  open http://{shown}:{viewer.server.get_port()} (bound to {host}; Ctrl-C stops)")
   try:
+    on_start(f"mfsample viewer: {KINDS[viewer.run.kind]} in {workdir}\n"
+             f"  open http://{shown}:{viewer.server.get_port()} (bound to {host}; Ctrl-C "
+             "stops)")
     while True:
       time.sleep(float(poll_seconds))
       viewer.refresh()
