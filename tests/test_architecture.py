@@ -6,7 +6,7 @@ import re
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 PACKAGE = ROOT / "mfsample"
-LAYERS = ("base", "core", "methods", "data", "training", "jobs")
+LAYERS = ("base", "core", "methods", "data", "training", "jobs", "apps")
 
 
 def _table():

@@ -339,6 +339,16 @@ def test_the_tiny_experiment_runs_end_to_end_and_resumes(tmp_path, monkeypatch):
   np.testing.assert_allclose(summary["ours_exact"]["u_ratio"], 1.0, rtol=1e-9)
   assert min(summary["ours"]["u_ratio"]) > 0.9
   assert "| Ours (exact) |" in (tmp_path / "a" / "table.md").read_text()
+  # The viewer (mfsample.viewer) reads every choice back, with the Q that made it.
+  from mfsample.viewer import open_run
+
+  steps = {s.key: s for s in open_run(tmp_path / "a").steps()}
+  assert set(steps) == {"shared"} | {f"{n}/{k}" for n in strategies.NAMES for k in (2, 3)}
+  np.testing.assert_allclose(steps["shared"].q, done["shared"]["q"])
+  ours = next(r for r in done["runs"] if r["strategy"] == "ours")["phases"]
+  np.testing.assert_allclose(steps["ours/3"].q, ours[1]["q"])
+  np.testing.assert_allclose(steps["ours/3"].next_light[1], ours[1]["light"])
+  assert steps["ours/2"].model_path is not None and steps["ours/3"].model_path is None
 
   # A run killed after the first light of Sobol resumes there and ends where the
   # uninterrupted run ended; finished strategies are loaded, not recomputed.
@@ -356,6 +366,9 @@ def test_the_tiny_experiment_runs_end_to_end_and_resumes(tmp_path, monkeypatch):
   with pytest.raises(KeyboardInterrupt):
     protocol.run_light_planning(config, str(tmp_path / "b"))
   assert calls["n"] == 1
+  running = {s.key: s for s in open_run(tmp_path / "b").steps()}
+  assert {"sobol/2", "sobol/trained2"} <= set(running)  # the killed strategy's latest phase
+  assert running["sobol/trained2"].model_path is not None
   monkeypatch.setattr(training, "save_state", save)
   trained = {"n": 0}
   train_steps = training.train_steps

@@ -44,6 +44,36 @@ def test_tiny_job_trains_maps_and_proposes(joint_run):
 
 
 @pytest.mark.slow
+def test_the_viewer_reads_the_job_as_it_wrote_it(joint_run):
+  """The viewer (`mfsample.viewer`) rebuilds the candidates from config.json as the job split
+  them, reads the model from the checkpoint and finds the job's U of the first proposal."""
+  from mfsample.viewer import open_run
+  from mfsample.viewer.models import Renderer, samples
+
+  workdir, _ = joint_run
+  run = open_run(workdir)
+  run.load_inputs()
+  assert run.inputs_error == ""
+  (step,) = run.steps()
+  with open(os.path.join(workdir, "next_views.json")) as f:
+    record = json.load(f)
+  assert step.candidates[1] == record["names"] and len(step.train[1]) == 6
+  np.testing.assert_allclose(step.scores, record["u"])
+  for proposal, top in zip(step.proposals, record["top_k"], strict=True):
+    np.testing.assert_allclose(step.candidates[0][proposal.index].world_to_camera,
+                               top["world_to_camera"], atol=1e-6)
+  model = run.model(step)
+  with open(os.path.join(workdir, "results.json")) as f:
+    assert model.num_live == json.load(f)["live_gaussians"]
+  num, seed = run.u_samples()
+  _, _, u = Renderer().colour(model, step.proposals[0].camera, samples(model, num, seed),
+                              run.background())
+  assert u == pytest.approx(record["top_k"][0]["u"], rel=1e-4)
+  truth = run.ground_truth(step, "candidates", step.proposals[0].index)
+  assert truth.shape == (32, 32, 3)
+
+
+@pytest.mark.slow
 def test_tiny_job_resumes_and_refuses_another_config(joint_run):
   workdir, results = joint_run
   config = next_views_configs.get_config("tiny")

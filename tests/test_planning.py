@@ -292,6 +292,20 @@ def test_protocol_runs_end_to_end_and_resumes(tmp_path):
     np.testing.assert_allclose(views.cameras.world_to_camera, rec["world_to_camera"],
                                atol=1e-6)
     assert (tmp_path / "views" / f"{rec['strategy']}-seed0" / "cameras.json").exists()
+  # Every round is recorded for the viewer (mfsample.planning.rounds): the choice, and the
+  # round model where the strategy has one.
+  from mfsample.viewer import open_run
+
+  steps = {s.key: s for s in open_run(tmp_path).steps()}
+  assert set(steps) == {f"{n}-seed0/{v}" for n in config.strategies for v in (1, 2)}
+  assert steps["random-seed0/1"].model_path is None
+  opt = steps["ours_opt_rnd-seed0/2"]
+  assert opt.model_path is not None and opt.proposals[0].index is None  # a new pose
+  record = next(r for r in results["runs"] if r["strategy"] == "ours_opt_rnd")
+  np.testing.assert_allclose(opt.proposals[0].camera.world_to_camera,
+                             record["world_to_camera"][2], atol=1e-6)
+  np.testing.assert_allclose(opt.train[0].world_to_camera, record["world_to_camera"][:2],
+                             atol=1e-6)
   table = (tmp_path / "table.md").read_text()
   assert "Ours (Opt. Rnd.)" in table and "PSNR↑ (3 views)" in table
   assert "seconds per run" in table and set(results["run_seconds"]) == set(config.strategies)
@@ -307,6 +321,8 @@ def test_protocol_runs_end_to_end_and_resumes(tmp_path):
   config.strategies = ("random",)
   more = runner.run_camera_planning(config, str(tmp_path))
   assert os.path.getmtime(run_file) == stamp and len(more["runs"]) == 2
+  seed1 = {s.key: s for s in open_run(tmp_path).steps()}["random-seed1/2"]
+  assert seed1.proposals[0].index == more["runs"][1]["indices"][2]
   assert len(more["summary"]["random"]["3"]["psnr"]["values"]) == 2
   # Finished runs of another protocol are never mixed into one table.
   config.rounds.steps += 1

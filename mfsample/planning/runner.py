@@ -38,6 +38,7 @@ from mfsample.data._io import area_downscale
 from mfsample.data.views import Views
 from mfsample.model import STOCHASTIC_KINDS
 from mfsample.planning import figures, poses, strategies, tables, training
+from mfsample.planning import rounds as rounds_lib
 from mfsample.planning.config import validate
 from mfsample.planning.pool import Pool, make_pool, stack_cameras
 from mfsample.renderer.budget import Budgets
@@ -442,7 +443,10 @@ def run_camera_planning(config, workdir):
         records.append(record)
         bar.update(rounds + len(eval_views))
         continue
-      strategy = strategies.make_strategy(name, config)
+      strategy = rounds_lib.record_rounds(
+          strategies.make_strategy(name, config), wd.file(rounds_lib.DIRECTORY),
+          run_name(name, seed), seed, keep_models=seed == int(config.seeds[0]),
+          keep=int(config.max_views))
       bar.set_postfix_str(f"{strategy.label}, seed {seed}")
       t_run = time.perf_counter()
       selected, budgets = plan_views(strategy, pool, config, seed, trainer, budgets,

@@ -1,0 +1,190 @@
+"""The models a job leaves in its workdir, as the viewer draws and renders them.
+
+A model is read from any `.npz` written by `mfsample.train.checkpoint.save_checkpoint`: a
+training checkpoint (a `TrainState`, leaves under `.model.`), a light-planning checkpoint
+(the same with transfer matrices in place of SH colour) or a round of camera planning
+(`mfsample.planning.rounds`, the `Model` itself). No template state is needed: the groups,
+capacity and rank are read from the arrays, so the viewer needs no training config.
+
+The sampler's B_hat bounds are not stored (they only clamp B_hat during training and play no
+part in sampling theta(z) = mean + B_hat z): the spec read here carries infinite bounds.
+"""
+
+import functools
+import re
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from mfsample import uncertainty as unc
+from mfsample.model import Model, Params, SamplerSpec, mean_gaussians
+from mfsample.renderer import sh as sh_lib
+from mfsample.renderer.budget import render_with_budget
+from mfsample.renderer.projection import covariance_3d
+from mfsample.renderer.settings import RenderSettings
+from mfsample.train import checkpoint as ckpt
+
+# Leaf names of a saved Model, alone or inside a TrainState (`jax.tree_util.keystr` paths).
+_LEAF = re.compile(r"^(?:\.model)?\.(?:params\.(mean|spread)|(signs))\['(\w+)'\]$")
+_FLAT = re.compile(r"^(?:\.model)?\.(mask|sh_degree)$")
+
+
+class ModelFileError(ValueError):
+  """A file that holds no readable model (the message names it)."""
+
+
+def read_model(path, sampler_kind="lowrank") -> Model:
+  """The `Model` saved in the `.npz` at `path`.
+
+  Args:
+    path: a checkpoint or round file (module docstring).
+    sampler_kind: the job's `sampler.kind` ("lowrank", "block", "diagonal" or
+      "deterministic"); the arrays do not tell lowrank from block.
+
+  Raises:
+    ModelFileError: the file is unreadable or holds no model.
+  """
+  try:
+    with np.load(path, allow_pickle=False) as data:
+      arrays = {name: data[name] for name in data.files if name != "__meta__"}
+  except (OSError, ValueError, EOFError) as e:
+    raise ModelFileError(f"{path} is unreadable ({type(e).__name__}: {e})") from e
+  groups = {"mean": {}, "spread": {}, "signs": {}}
+  flat = {}
+  for name, value in arrays.items():
+    if m := _LEAF.match(name):
+      groups[m.group(1) or m.group(2)][m.group(3)] = value
+    elif m := _FLAT.match(name):
+      flat[m.group(1)] = value
+  if not groups["mean"] or "mask" not in flat:
+    raise ModelFileError(f"{path} holds no model (no mean parameters and mask)")
+  spread = groups["spread"]
+  kind = sampler_kind if spread else "deterministic"
+  rank = 1
+  if spread and kind in ("lowrank", "block"):
+    any_group = next(iter(spread))
+    rank = int(spread[any_group].shape[-1])
+  spec = SamplerSpec(kind=kind, rank=rank, groups=tuple(spread),
+                     bounds=tuple((g, float("inf")) for g in spread))
+  return Model(params=Params(mean=groups["mean"], spread=spread), signs=groups["signs"],
+               mask=flat["mask"].astype(bool), sh_degree=np.asarray(flat.get("sh_degree", 0)),
+               spec=spec)
+
+
+def read_meta(path):
+  """The metadata dict of a checkpoint or round file, or None when it cannot be read (a file
+  being replaced by a running job is read again at the next poll)."""
+  try:
+    return ckpt.read_meta(path)
+  except (ckpt.CorruptCheckpointError, OSError):
+    return None
+
+
+def is_relightable(model):
+  return "transfer_dc" in model.params.mean
+
+
+def live(model):
+  """[C] bool numpy mask of the live Gaussians."""
+  return np.asarray(model.mask, bool)
+
+
+def splat_colours(model, eye, light=None):
+  """[N_live, 3] display colours of the live Gaussians seen from the point `eye` [3].
+
+  SH colour: max(sum_k sh_k Y_k(d) + 0.5, 0) as the renderer shades it; a relightable
+  model: its radiance under the SH light `light` [n] (the uniform light when None). Clipped to
+  [0, 1] for display.
+  """
+  keep = live(model)
+  mean = {g: np.asarray(v)[keep] for g, v in model.params.mean.items()}
+  dirs = mean["means"] - np.asarray(eye, np.float32)
+  dirs /= np.maximum(np.linalg.norm(dirs, axis=-1, keepdims=True), 1e-12)
+  if is_relightable(model):
+    from mfsample.lighting import field
+    from mfsample.lighting.lights import uniform_light
+
+    n = mean["transfer_dc"].shape[2]
+    xi = uniform_light(n) if light is None else np.asarray(light)
+    rgb = np.asarray(field.radiance(mean, jnp.asarray(xi, jnp.float32), jnp.asarray(dirs)))
+  else:
+    g = mean_gaussians(model)
+    rgb = np.asarray(sh_lib.sh_to_color(jnp.asarray(np.asarray(g.sh)[keep]), jnp.asarray(dirs)))
+  return np.clip(rgb, 0.0, 1.0)
+
+
+def splats(model, eye, light=None):
+  """(centres [N, 3], covariances [N, 3, 3], rgbs [N, 3], opacities [N, 1]) of the live
+  Gaussians of the mean model: what a splat scene node takes."""
+  keep = live(model)
+  g = activate_geometry(model)
+  cov = covariance_3d(g.scales, g.quats)  # the renderer's own: R diag(s^2) R^T
+  return (np.asarray(g.means)[keep].astype(np.float32), np.asarray(cov)[keep].astype(np.float32),
+          splat_colours(model, eye, light).astype(np.float32),
+          np.asarray(g.opacities)[keep, None].astype(np.float32))
+
+
+def activate_geometry(model):
+  """The mean model's `Gaussians` (SH colour or a relightable model's geometry alone)."""
+  if is_relightable(model):
+    from mfsample.lighting import field
+    return field.geometry(model.params.mean, model.mask)
+  return mean_gaussians(model)
+
+
+# ------------------------------------------------------------------ renders of one camera
+
+
+@functools.partial(jax.jit, static_argnames=("settings",))
+def _mean_render(model, camera, background, *, settings):
+  from mfsample.renderer import render
+  return render(mean_gaussians(model), camera, background=background, settings=settings)
+
+
+@functools.partial(jax.jit, static_argnames=("settings",))
+def _relit_mean_render(model, camera, xi, *, settings):
+  from mfsample.lighting import field
+  return field.render_relit(model.params.mean, model.mask, xi, camera, settings=settings)
+
+
+class Renderer:
+  """Mean renders and per-pixel U maps of one camera at a time, on whatever device JAX has.
+
+  Keeps the render budget that sufficed (it grows on overflow, never truncates), so later
+  cameras of the same size reuse the compiled code.
+  """
+
+  def __init__(self, settings=None):
+    self.settings = settings or RenderSettings(max_intersections=1 << 12)
+
+  def _fit(self, fn, *args, **kwargs):
+    out, self.settings = render_with_budget(fn, self.settings, *args, **kwargs)
+    return out
+
+  def colour(self, model, camera, z, background):
+    """(mean render [H, W, 3], U map [H, W], U) of a colour model."""
+    bg = jnp.asarray(background, jnp.float32)
+    rgb = self._fit(_mean_render, model, camera, bg).rgb
+    if z.shape[0] < 2 or not model.spec.stochastic:
+      return np.clip(np.asarray(rgb), 0, 1), np.zeros(rgb.shape[:2], np.float32), 0.0
+    u = self._fit(unc.uncertainty, model, camera, z, background=bg)
+    return (np.clip(np.asarray(rgb), 0, 1), np.asarray(u.pixel_map),
+            float(u.value))
+
+  def relit(self, model, camera, z, xi):
+    """(mean render [H, W, 3], U(xi) map [H, W], U) of a relightable model under xi."""
+    from mfsample.lighting.uncertainty import light_pixel_map
+
+    xi = jnp.asarray(xi, jnp.float32)
+    rgb = self._fit(_relit_mean_render, model, camera, xi).rgb
+    if z.shape[0] < 2 or not model.spec.stochastic:
+      return np.clip(np.asarray(rgb), 0, 1), np.zeros(rgb.shape[:2], np.float32), 0.0
+    pmap, _, _ = self._fit(light_pixel_map, model, camera, z, xi,
+                           stats_of=lambda out: out[2])
+    return np.clip(np.asarray(rgb), 0, 1), np.asarray(pmap), float(np.sum(pmap))
+
+
+def samples(model, num, seed):
+  """[M, ...] z for U maps: the job's own choice (`uncertainty.uncertainty_z`)."""
+  return unc.uncertainty_z(model, int(num), int(seed))
