@@ -19,6 +19,17 @@ import tempfile
 import numpy as np
 
 
+def _umask():
+  mask = os.umask(0)
+  os.umask(mask)
+  return mask
+
+
+# The process's file-creation mask, read once: result files get the permissions any new file
+# of the user gets (os.umask can only be read by setting it).
+_UMASK = _umask()
+
+
 @contextlib.contextmanager
 def atomic_path(path):
   """Yields a temporary path beside `path`; on success it replaces `path` atomically.
@@ -39,6 +50,7 @@ def atomic_path(path):
     fd, tmp = tempfile.mkstemp(dir=folder, prefix=os.path.basename(path) + ".",
                                suffix=".tmp" + os.path.splitext(path)[1])
     os.close(fd)
+    os.chmod(tmp, 0o666 & ~_UMASK)  # mkstemp's 0600 would hide results from other users
   except OSError as e:
     raise OSError(e.errno, f"cannot write {path}: {e.strerror}", path) from e
   try:

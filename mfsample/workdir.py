@@ -192,7 +192,12 @@ def locked(workdir, what="a run"):
   try:
     yield
   finally:
-    os.remove(path)  # while still held: the next holder finds no stale record
+    # Removed while still held, so the next holder finds no stale record; only if the path is
+    # still this lock's file (a user may have removed the workdir meanwhile).
+    with contextlib.suppress(FileNotFoundError):
+      if os.stat(path).st_ino == os.fstat(fd).st_ino:
+        os.remove(path)
     os.close(fd)
-    if created and not os.listdir(workdir):
-      os.rmdir(workdir)
+    with contextlib.suppress(OSError):
+      if created and not os.listdir(workdir):
+        os.rmdir(workdir)

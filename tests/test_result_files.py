@@ -51,3 +51,23 @@ def test_write_json_writes_undefined_numbers_as_null(tmp_path):
   assert "NaN" not in text and "Infinity" not in text
   assert json.loads(text) == {"rho": None, "u": [1.5, None, None],
                               "nested": [{"x": None, "n": 3}], "ok": 0.25, "text": "nan"}
+
+
+def test_result_files_get_the_permissions_of_any_new_file(tmp_path):
+  import os
+
+  from mfsample._json import write_json
+
+  mask = os.umask(0o022)
+  try:
+    write_json(str(tmp_path / "a.json"), {})
+  finally:
+    os.umask(mask)
+  # 0644 under the usual umask 022 (the module reads the umask at import: 022 in CI too).
+  assert (tmp_path / "a.json").stat().st_mode & 0o777 == 0o666 & ~_json_umask()
+
+
+def _json_umask():
+  from mfsample import _json
+
+  return _json._UMASK

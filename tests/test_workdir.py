@@ -44,3 +44,15 @@ def test_another_process_is_refused_and_its_lock_goes_with_it(tmp_path):
       info = json.loads((workdir / ".lock").read_text())
       assert info["pid"] == os.getpid()
   assert not (workdir / ".lock").exists()
+
+
+def test_a_workdir_removed_during_the_run_ends_it_cleanly(tmp_path):
+  import shutil
+
+  workdir = str(tmp_path / "run")
+  with workdir_lib.locked(workdir):
+    shutil.rmtree(workdir)  # the user deleted it; another run may even hold it now
+    os.makedirs(workdir)
+    with workdir_lib.locked(workdir):
+      pass
+  assert not os.path.exists(workdir)
