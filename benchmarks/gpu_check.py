@@ -80,7 +80,8 @@ MIN_PART_SECONDS = 10.0
 _GARDEN = flags.DEFINE_string(
     "garden", "", "gsplat's test_garden.npz (default: a generated stand-in with the same "
     "statistics, whose tile intersections differ from the real garden's).")
-_OUT = flags.DEFINE_string("out", "workdirs/gpu_check", "Folder of gpu_check.json / .md.")
+_OUT = flags.DEFINE_string("out", "workdirs/benchmarks/gpu_check",
+                           "Folder of gpu_check.json and gpu_check.md.")
 _PARTS = flags.DEFINE_list("parts", list(DEFAULT_PARTS), "Parts to run, in order.")
 _REPEATS = flags.DEFINE_integer("repeats", 10, "Timed calls per figure (median).")
 _BUDGET = flags.DEFINE_float("time_budget_s", 450.0,
