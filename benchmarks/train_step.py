@@ -20,13 +20,22 @@ where small steps are bound by launch latency, sweep it at the paper's scale:
 
   python benchmarks/train_step.py --size=400 --points=100000 --rounds=1 \
       --variants=deterministic@16,deterministic@64,deterministic@256,deterministic@1024
+
+--compositor selects the renderer's compositor for every variant. --render_share also times
+the renderer's forward+backward alone (on the step's mean Gaussians, the first training
+camera, the same settings) and reports the share of the step spent outside it,
+1 - M * render / step: the loss, SSIM, sampling and the optimiser. --fit_start_budget sizes
+the first step's intersection budget from that render, so that a step that would overflow
+the configured start budget is not compiled twice.
+
+  PYTHONPATH=. python benchmarks/train_step.py --size=400 --points=100000 --samples=1 \
+      --variants=rank2 --rounds=1 --compositor=pallas --render_share --fit_start_budget
 """
 
 import copy
 import dataclasses
 import json
 import os
-import resource
 import statistics
 import subprocess
 import sys
@@ -60,6 +69,12 @@ _CLOCK = flags.DEFINE_enum(
     "What a step's time is: wall-clock, or the CPU time of the measuring process (all its "
     "threads: the work done, steadier than wall-clock on a machine shared with other jobs, "
     "and no measure of speed on a GPU).")
+_COMPOSITOR = flags.DEFINE_enum("compositor", None, ["jnp", "pallas"],
+                                "render.compositor of every variant (default: the config's).")
+_RENDER_SHARE = flags.DEFINE_bool(
+    "render_share", False, "Also time the renderer alone and report the step's share outside.")
+_FIT_START_BUDGET = flags.DEFINE_bool(
+    "fit_start_budget", False, "Size the first step's budget from a render of the start model.")
 _OUT = flags.DEFINE_string("out", "workdirs/benchmarks/train_step.json", "Output JSON.")
 _CHILD = flags.DEFINE_string("child", None, "Internal: run one variant and print JSON.")
 
@@ -144,12 +159,8 @@ def _from_trained(fresh, setup, checkpoint_dir):
   return init_train_state(model, setup.step_config, jax.random.PRNGKey(0))
 
 
-def _peak_rss_mb():
-  peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-  return peak / (2**20 if sys.platform == "darwin" else 1024.0)  # bytes on macOS, KiB on Linux
-
-
-def measure_variant(config, *, steps, warmup, from_checkpoints=None, clock="wall"):
+def measure_variant(config, *, steps, warmup, from_checkpoints=None, clock="wall",
+                    render_share=False, fit_start_budget=False):
   """Times the jitted training step of `config` in this process.
 
   The step is compiled, run `warmup` times untimed, then `steps` times, each call timed to
@@ -164,17 +175,30 @@ def measure_variant(config, *, steps, warmup, from_checkpoints=None, clock="wall
       initial cloud.
     clock: "wall" (`time.perf_counter`) or "process" (`time.process_time`: CPU time of
       this process, every thread).
+    render_share: also time the renderer's forward+backward alone on the final state's mean
+      Gaussians from the first training camera (`mfsample._bench.time_render`, the step's
+      settings with the budget that render needs) and report the share of the step outside
+      the renderer, 1 - M * render_forward_backward_ms / ms_median (an estimate: the step
+      renders M samples of the model, not its mean).
+    fit_start_budget: start with the budget the start model's mean needs from the first
+      training camera (when above the configured one), so that the first step does not
+      compile at a budget that overflows.
 
   Returns:
     {ms_median, ms_min, ms_all [steps], peak_rss_mb (of this process so far: a variant's
-    own only in a fresh process), seconds_total, capacity, live, budget, chunks_per_step,
-    params_per_gaussian (floats trained per Gaussian: mean and B_hat), resolution}.
+    own only in a fresh process), device_peak_mb (the device allocator's peak so far; None
+    on a CPU), seconds_total, capacity, live, budget, chunks_per_step,
+    compositor, params_per_gaussian (floats trained per Gaussian: mean and B_hat),
+    resolution, samples}; with `render_share` also render_forward_backward_ms,
+    render_intersections and outside_renderer_share.
   """
   import jax
   import jax.numpy as jnp
   import numpy as np
 
+  from mfsample._bench import device_memory_mb, fitted_settings, peak_rss_mb, time_render
   from mfsample.data import datasets as data_lib
+  from mfsample.model import mean_gaussians
   from mfsample.renderer.budget import fit_budget
   from mfsample.train import loop
   from mfsample.train.step import make_train_step
@@ -186,6 +210,13 @@ def measure_variant(config, *, steps, warmup, from_checkpoints=None, clock="wall
   if from_checkpoints:
     state = _from_trained(state, setup, from_checkpoints)
   m = setup.step_config.num_samples
+  first_camera = jax.tree.map(lambda x: x[0], views.cameras)
+  if fit_start_budget:
+    fitted = fitted_settings(mean_gaussians(state.model), first_camera,
+                             setup.step_config.settings)
+    if fitted.max_intersections > setup.step_config.settings.max_intersections:
+      setup = setup._replace(step_config=dataclasses.replace(setup.step_config,
+                                                             settings=fitted))
   fn = make_train_step(setup.step_config)
   timer = time.process_time if clock == "process" else time.perf_counter
   t0 = time.perf_counter()
@@ -207,17 +238,29 @@ def measure_variant(config, *, steps, warmup, from_checkpoints=None, clock="wall
     if step >= warmup:
       times.append(dt)
     step += 1
-  return {
+  settings = setup.step_config.settings
+  result = {
       "ms_median": 1e3 * statistics.median(times), "ms_min": 1e3 * min(times),
-      "ms_all": [1e3 * t for t in times], "peak_rss_mb": _peak_rss_mb(),
+      "ms_all": [1e3 * t for t in times], "peak_rss_mb": peak_rss_mb(),
       "seconds_total": time.perf_counter() - t0,
       "capacity": int(state.model.capacity), "live": int(np.sum(np.asarray(state.model.mask))),
-      "budget": setup.step_config.settings.max_intersections,
-      "chunks_per_step": setup.step_config.settings.chunks_per_step,
+      "budget": settings.max_intersections, "chunks_per_step": settings.chunks_per_step,
+      "compositor": settings.compositor,
       "params_per_gaussian": int(sum(np.prod(x.shape[1:]) for x in
                                      jax.tree.leaves(state.model.params))),
-      "resolution": int(views.images.shape[1]),
+      "resolution": int(views.images.shape[1]), "samples": int(m),
+      "device_peak_mb": device_memory_mb()[0],
   }
+  if render_share:
+    gaussians = mean_gaussians(state.model)
+    timing = time_render(gaussians, first_camera,
+                         fitted_settings(gaussians, first_camera, settings),
+                         repeats=steps, clock=clock)
+    render_ms = timing.figures["forward_backward_ms"]
+    result.update(render_forward_backward_ms=render_ms,
+                  render_intersections=timing.figures["intersections"],
+                  outside_renderer_share=1.0 - m * render_ms / result["ms_median"])
+  return result
 
 
 def run_rounds(variants, rounds, measure, log=print):
@@ -244,7 +287,8 @@ def summarize(variants, rounds):
   Each row: ms_per_step (median over rounds), ms_rounds, peak_rss_mb (max over rounds),
   params_per_gaussian, chunks_per_step, vs_first (median over rounds of the ratio to the
   first variant in the same round) and, where `deterministic[@C]` with the same C was
-  measured, ratio (the same, against it).
+  measured, ratio (the same, against it); outside_renderer_share (median over rounds) where
+  measured.
   """
   table = {}
   first = variants[0]
@@ -263,6 +307,9 @@ def summarize(variants, rounds):
     if base in rounds[0]:
       row["ratio"] = within_rounds(variant, base)
     row["vs_first"] = within_rounds(variant, first)
+    if "outside_renderer_share" in rounds[0][variant]:
+      row["outside_renderer_share"] = statistics.median(
+          r[variant]["outside_renderer_share"] for r in rounds)
     table[variant] = row
   return table
 
@@ -274,6 +321,10 @@ def _child_flags():
           f"--clock={_CLOCK.value}"]
   if _FROM.value:
     args.append(f"--from_checkpoints={_FROM.value}")
+  if _COMPOSITOR.value:
+    args.append(f"--compositor={_COMPOSITOR.value}")
+  args += [f"--render_share={_RENDER_SHARE.value}",
+           f"--fit_start_budget={_FIT_START_BUDGET.value}"]
   return args
 
 
@@ -287,10 +338,15 @@ def _measure_in_subprocess(variant):
 
 
 def _measure_here(variant):
-  base, _ = base_config(_DATA.value, _SIZE.value, _POINTS.value, _SAMPLES.value)
-  return measure_variant(variant_config(base, variant), steps=_STEPS.value,
-                         warmup=_WARMUP.value, from_checkpoints=_FROM.value,
-                         clock=_CLOCK.value)
+  base, scene = base_config(_DATA.value, _SIZE.value, _POINTS.value, _SAMPLES.value)
+  config = variant_config(base, variant)
+  if _COMPOSITOR.value:
+    config.render.compositor = _COMPOSITOR.value
+  result = measure_variant(config, steps=_STEPS.value, warmup=_WARMUP.value,
+                           from_checkpoints=_FROM.value, clock=_CLOCK.value,
+                           render_share=_RENDER_SHARE.value,
+                           fit_start_budget=_FIT_START_BUDGET.value)
+  return dict(result, scene=scene)
 
 
 def main(argv):
@@ -310,10 +366,12 @@ def main(argv):
                       log=lambda line: print(line, flush=True))
   table = summarize(_VARIANTS.value, rounds)
   print(f"\n{'variant':>16} | {'ms/step':>8} | {'ratio':>6} | {'vs_first':>8} | "
-        f"{'peak RSS MB':>11} | params/G")
+        f"{'peak RSS MB':>11} | params/G | outside renderer")
   for variant, row in table.items():
+    share = row.get("outside_renderer_share")
     print(f"{variant:>16} | {row['ms_per_step']:8.1f} | {row.get('ratio', float('nan')):6.3f} | "
-          f"{row['vs_first']:8.3f} | {row['peak_rss_mb']:11.0f} | {row['params_per_gaussian']}")
+          f"{row['vs_first']:8.3f} | {row['peak_rss_mb']:11.0f} | {row['params_per_gaussian']:8} | "
+          + ("-" if share is None else f"{share:.0%}"))
   first = rounds[0][_VARIANTS.value[0]]
   from mfsample._bench import machine  # after the children: they had the device to themselves
   from mfsample._json import write_json
@@ -329,4 +387,5 @@ def main(argv):
 
 
 if __name__ == "__main__":
+  sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
   app.run(main)

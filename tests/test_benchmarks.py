@@ -5,35 +5,18 @@ says (every variant present, ratios taken within one run, curves over the right 
 and refuses missing inputs with a message naming the flag.
 """
 
-import importlib
 import json
 import math
 import os
 
 import numpy as np
 import pytest
-from absl import flags
+from bench_testlib import import_script
 
 from configs import train as train_configs
 from mfsample import _bench
 
-
-def _import_script(name):
-  """benchmarks/<name>.py as a module, and its flags' defaults.
-
-  Each script is an absl main: its flags (`--out`, `--data`, ...) are global and would
-  clash with the next script's, so they are removed again once their defaults are read.
-  The measurement functions never read flags.
-  """
-  module = importlib.import_module(f"benchmarks.{name}")
-  owned = list(flags.FLAGS.flags_by_module_dict().get(module.__name__, []))
-  defaults = {flag.name: flag.default for flag in owned}
-  for flag in owned:
-    delattr(flags.FLAGS, flag.name)
-  return module, defaults
-
-
-SCRIPTS = {name: _import_script(name) for name in (
+SCRIPTS = {name: import_script(name) for name in (
     "train_step", "candidate_scoring", "train_quality", "tradeoffs", "capture")}
 train_step = SCRIPTS["train_step"][0]
 candidate_scoring = SCRIPTS["candidate_scoring"][0]
@@ -128,6 +111,18 @@ def test_train_step_rounds_interleave_and_ratios_are_within_rounds():
   assert rank2["params_per_gaussian"] == 3 * det["params_per_gaussian"]
   assert rounds[0]["rank2"]["live"] == base.model.init_points
   assert rounds[0]["rank2"]["resolution"] == base.data.synthetic.height
+
+
+@pytest.mark.slow
+def test_train_step_reports_the_renderer_share_from_a_fitted_start_budget():
+  config = train_step.variant_config(tiny_base(), "rank2")
+  config.render.max_intersections = 256  # too small: the start budget is fitted first
+  result = train_step.measure_variant(config, steps=2, warmup=1, render_share=True,
+                                      fit_start_budget=True)
+  assert result["budget"] > 256 and result["compositor"] == "jnp" and result["samples"] == 1
+  assert result["render_forward_backward_ms"] > 0 and result["render_intersections"] > 0
+  assert result["outside_renderer_share"] == pytest.approx(
+      1.0 - result["render_forward_backward_ms"] / result["ms_median"])
 
 
 # ------------------------------------------------------------------ candidate_scoring.py

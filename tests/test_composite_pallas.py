@@ -7,6 +7,7 @@ gradients within 1e-4 of the largest gradient of each parameter group. The scene
 """
 
 import functools
+import re
 
 import jax
 import jax.numpy as jnp
@@ -30,7 +31,7 @@ from render_testlib import (
 
 from mfsample import RenderSettings, render
 from mfsample._pytree import replace
-from mfsample.renderer.composite_pallas import tile_ranges
+from mfsample.renderer.composite_pallas import KernelParams, _forward, tile_ranges
 from mfsample.testing import orbit_camera, random_gaussians
 
 IMAGE_ATOL = 1e-5
@@ -159,6 +160,38 @@ def test_kernel_lowers_for_cuda_on_a_cpu():
     assert text.count(f"@{triton}(") == 2, "one forward and one backward kernel"
 
 
+def test_warps_setting_reaches_both_kernels():
+  """`pallas_warps` is the Triton launch's warp count (0: one per 32 pixels of a tile)."""
+  g = random_gaussians(12, sh_degree=1, seed=1, scale_range=(0.1, 0.3))
+  cam = orbit_camera(16, 16, azimuth=0.1)
+  triton = "__gpu$xla.gpu.triton"
+  for warps, launched in ((0, 8), (2, 2)):
+    settings = pallas(SMALL).replace(pallas_warps=warps)
+    grad = jax.jit(jax.grad(lambda g, s=settings: jnp.sum(render(g, cam, settings=s).rgb)))
+    text = export.export(grad, platforms=("cuda",), disabled_checks=[
+        export.DisabledSafetyCheck.custom_call(triton)])(g).mlir_module()
+    assert re.findall(r"num_warps = (\d+)", text) == [str(launched)] * 2
+
+
+def test_backward_walk_starts_at_the_last_entry_a_pixel_blended():
+  """The forward saves per pixel the position after the last entry it blended with
+  alpha >= alpha_min: list entries behind it that reach no pixel centre (here 15 faint
+  Gaussians centred on a pixel corner, whose footprints, 0.44 pixels across, hold no pixel
+  centre) are not walked back, although no pixel of the tile ever saturates."""
+  params = KernelParams(tile_size=16, tiles_x=1, num_tiles=1, chunk_size=8, width=16,
+                        height=16, alpha_max=0.99, alpha_min=1 / 255, log_t_min=np.log(1e-4),
+                        cut=-0.5 * 3.33**2)
+  faint = [3.0, 3.0, 1.0, 0.0, 1.0, 1.1 / 255]  # mean x, y, conic a, b, c, opacity
+  rows = np.array([[8.0, 8.0, 0.25, 0.0, 0.25, 0.5]] + [faint] * 15, np.float32)
+  geometry = jnp.asarray(rows.reshape(2, 8, 6).transpose(0, 2, 1))  # [B, 6, C]
+  features = jnp.ones((2, 1, 8), jnp.float32)
+  first, count = jnp.array([0], jnp.int32), jnp.array([2], jnp.int32)
+  _, coverage, _, last = _forward(params, first, count, geometry, features)
+  assert 0.4 < float(jnp.max(coverage)) <= 0.5  # no pixel saturates
+  # Pixels in the first Gaussian's footprint end after it, the others before any entry.
+  np.testing.assert_array_equal(np.unique(last), [0, 1])
+
+
 def test_tile_ranges_from_the_chunk_list():
   chunk_tile = jnp.array([0, 0, 2, 2, 2, 3, 5, 5, 5, 5], jnp.int32)  # 5 tiles; 5 = unused
   first, count = tile_ranges(chunk_tile, 5)
@@ -175,3 +208,5 @@ def test_settings_validate_the_compositor():
     RenderSettings(compositor="pallas", chunk_size=24, max_intersections=24 * 16)
   with pytest.raises(ValueError, match="searchsorted_method"):
     RenderSettings(searchsorted_method="bisect")
+  with pytest.raises(ValueError, match="pallas_warps"):
+    RenderSettings(pallas_warps=3)

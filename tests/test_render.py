@@ -82,15 +82,20 @@ def test_an_opaque_gaussian_contributes_to_its_alpha_cut_not_to_3_sigma():
   np.testing.assert_array_equal(alpha[beyond], 0.0)
 
 
-@functools.partial(jax.jit, static_argnames=("settings",))
-def _render_with_3_sigma_footprints(g, cam, settings):
-  """The renderer before the alpha rule, from its stages: every Gaussian listed in the
-  tiles of its 3-sigma square, whatever its opacity. Returns (rgb, stats)."""
+@functools.partial(jax.jit, static_argnames=("settings", "three_sigma"))
+def _render_with_square_footprints(g, cam, settings, three_sigma):
+  """The renderer from its stages, every Gaussian listed in the tiles of the square around
+  its footprint's bounding disc (the tile lists before bounding boxes) or, with
+  `three_sigma`, around its 3-sigma disc whatever its opacity (the renderer before the alpha
+  rule). Returns (rgb, stats)."""
   proj = project_gaussians(g.means, g.scales, g.quats, g.opacities, g.mask, cam, settings)
-  sigmas = footprint_sigma(g.opacities, settings)  # proj.radii = sigmas * sqrt(lambda_max)
-  ok = proj.valid & (sigmas > 0)
-  radii = jnp.where(ok, 3.0 * proj.radii / jnp.where(ok, sigmas, 1.0), 0.0)
-  layout = intersect_tiles(proj._replace(radii=radii), cam.width, cam.height, settings)
+  radii = proj.radii
+  if three_sigma:
+    sigmas = footprint_sigma(g.opacities, settings)  # proj.radii = sigmas * sqrt(lambda_max)
+    ok = proj.valid & (sigmas > 0)
+    radii = jnp.where(ok, 3.0 * proj.radii / jnp.where(ok, sigmas, 1.0), 0.0)
+  layout = intersect_tiles(proj._replace(extents=jnp.stack([radii, radii], -1)), cam.width,
+                           cam.height, settings)
   colors = sh_to_color(g.sh, view_directions(g.means, cam))
   blend_in = jnp.concatenate([colors, proj.depths[:, None]], axis=-1)
   opacities = jnp.where(proj.valid, g.opacities, 0.0)
@@ -109,10 +114,40 @@ def test_radius_sigma_3_reproduces_the_3_sigma_renderer():
   g, cam = hard_scene(3)
   settings = SMALL.replace(radius_sigma=3.0)
   new = render(g, cam, background=BACKGROUND, settings=settings)
-  old_rgb, old_stats = _render_with_3_sigma_footprints(g, cam, settings)
+  old_rgb, old_stats = _render_with_square_footprints(g, cam, settings, three_sigma=True)
   np.testing.assert_allclose(new.rgb, old_rgb, atol=1e-6)
   assert not bool(old_stats.overflow)
   assert int(new.stats.num_intersections) < int(old_stats.num_intersections)
+
+
+def test_bounding_box_tile_lists_render_the_images_of_bounding_squares():
+  """Listing a Gaussian in the tiles of its footprint's bounding box, not of the square
+  around the footprint's bounding disc, drops only tiles where it contributes nothing:
+  fewer intersections, the same image to float rounding."""
+  g, cam = hard_scene(3)
+  new = render(g, cam, background=BACKGROUND, settings=SMALL)
+  old_rgb, old_stats = _render_with_square_footprints(g, cam, SMALL, three_sigma=False)
+  np.testing.assert_allclose(new.rgb, old_rgb, atol=1e-6)
+  assert not bool(old_stats.overflow)
+  assert int(new.stats.num_intersections) < int(old_stats.num_intersections)
+
+
+def test_running_every_loop_step_changes_nothing():
+  """`skip_unused_steps=False` (no `lax.cond` in the jnp compositor's loop) computes the
+  unused steps on empty chunks: the same images and gradients, plain and vmapped."""
+  gaussians, cam = hard_scene(3)
+  weights = loss_weights()
+  every_step = SMALL.replace(skip_unused_steps=False)
+  want, grads_want = render_and_grads(gaussians, cam, weights, settings=SMALL)
+  got, grads_got = render_and_grads(gaussians, cam, weights, settings=every_step)
+  assert int(render(gaussians, cam, settings=SMALL).stats.num_padded) < SMALL.max_intersections
+  for g, w in zip(got, want, strict=True):
+    np.testing.assert_allclose(g, w, atol=1e-7)
+  assert_grads_close(grads_got, grads_want, rtol=1e-6)
+  cams = jax.tree.map(lambda *x: jnp.stack(x), cam, orbit_camera(WIDTH, HEIGHT, azimuth=2.0))
+  images = [jax.jit(jax.vmap(lambda c, s=s: render(gaussians, c, settings=s).rgb))(cams)
+            for s in (SMALL, every_step)]
+  np.testing.assert_allclose(images[1], images[0], atol=1e-7)
 
 
 def test_3dgs_rules_on_a_stack_of_opaque_gaussians():

@@ -21,20 +21,22 @@ def _layout(settings, num=150):
   return proj, intersect_tiles(proj, W, H, settings)
 
 
-def _expected_pairs(proj, settings):
-  """Brute force: (tile, Gaussian) for every tile whose pixel centres meet the square."""
-  ts = settings.tile_size
-  tx, ty = tile_grid(W, H, ts)
+def _contributing_pairs(proj, settings, num=150):
+  """Brute force: (tile, Gaussian) for every tile with a pixel centre where the Gaussian
+  contributes by the compositor's rule (d <= radius_sigma and alpha >= alpha_min)."""
+  opacities = np.asarray(random_gaussians(num, seed=3, scale_range=(0.01, 0.2)).opacities)
+  tx, _ = tile_grid(W, H, settings.tile_size)
+  py, px = np.mgrid[0:H, 0:W] + 0.5
+  tile = (py.astype(int) // settings.tile_size) * tx + px.astype(int) // settings.tile_size
+  means2d, conics, valid = map(np.asarray, (proj.means2d, proj.conics, proj.valid))
   pairs = set()
-  means2d, radii, valid = map(np.asarray, (proj.means2d, proj.radii, proj.valid))
   for i in np.flatnonzero(valid):
-    r = radii[i] + 0.5
-    for t in range(tx * ty):
-      x0, y0 = (t % tx) * ts, (t // tx) * ts
-      cx = np.clip(means2d[i, 0], x0 + 0.5, x0 + ts - 0.5)  # nearest pixel centre in tile
-      cy = np.clip(means2d[i, 1], y0 + 0.5, y0 + ts - 0.5)
-      if abs(cx - means2d[i, 0]) <= r and abs(cy - means2d[i, 1]) <= r:
-        pairs.add((t, i))
+    dx, dy = px - means2d[i, 0], py - means2d[i, 1]
+    a, b, c = conics[i]
+    power = -0.5 * (a * dx * dx + c * dy * dy) - b * dx * dy
+    alpha = np.minimum(settings.alpha_max, opacities[i] * np.exp(power))
+    keep = (power >= -0.5 * settings.radius_sigma ** 2) & (alpha >= settings.alpha_min)
+    pairs.update((int(t), int(i)) for t in np.unique(tile[keep]))
   return pairs
 
 
@@ -46,9 +48,9 @@ def test_every_overlapping_tile_is_listed_once_in_depth_order():
   chunk_tile = np.asarray(layout.chunk_tile)
   listed = [(int(chunk_tile[b]), int(ids[b, c])) for b, c in np.argwhere(live)]
   assert len(listed) == len(set(listed)) == int(layout.stats.num_intersections)
-  # The listed set contains every tile the square truly touches (it may add a neighbour
-  # within the half-pixel rounding slack, which is harmless: pixels are cut exactly).
-  assert _expected_pairs(proj, settings) <= set(listed)
+  # The listed set contains every tile where the Gaussian contributes to a pixel (it may add
+  # tiles its bounding box touches without a contributing pixel, which cost time only).
+  assert _contributing_pairs(proj, settings) <= set(listed)
   # Chunks belong to one tile each, tiles ascending, depth ascending within a tile.
   depths = np.asarray(proj.depths)
   num_chunks = int(layout.num_chunks)
@@ -64,6 +66,21 @@ def test_every_overlapping_tile_is_listed_once_in_depth_order():
   assert int(layout.stats.num_padded) == num_chunks * settings.chunk_size
   assert int(layout.stats.max_tile_load) == max(
       np.sum(live[chunk_tile == t]) for t in np.unique(chunk_tile[:num_chunks]))
+
+
+def test_bounding_boxes_are_tighter_than_the_bounding_squares():
+  """The extents are the ellipse's exact x and y extremes: never beyond its bounding disc,
+  touching it along one axis, and on these anisotropic Gaussians fewer tiles in all."""
+  settings = RenderSettings(max_intersections=4096, chunk_size=8, chunks_per_step=4)
+  proj, layout = _layout(settings)
+  radii, extents, valid = map(np.asarray, (proj.radii, proj.extents, proj.valid))
+  assert np.all(extents <= radii[:, None]) and np.all(extents[~valid] == 0)
+  # lambda_max <= a + c <= 2 max(a, c): the box is at least the square shrunk by sqrt(2).
+  assert np.all(extents[valid].max(axis=1) >= (1 - 1e-5) * radii[valid] / np.sqrt(2))
+  x0, x1, y0, y1 = map(np.asarray, tiles.tile_bounds(
+      proj.means2d, jnp.stack([proj.radii] * 2, -1), W, H, settings.tile_size))
+  squares = int(np.sum(np.where(valid, (x1 - x0) * (y1 - y0), 0)))
+  assert int(layout.stats.num_intersections) < squares
 
 
 def test_overflow_is_flagged_with_an_upper_bound_of_the_need():

@@ -24,9 +24,13 @@ across steps by a carry. The weighted sums of features are a batched matrix prod
 the inner loop is dense linear algebra on [C, tile_size^2] blocks. The products run in full
 float32 (`precision.py`).
 
-The loop runs over steps of `chunks_per_step` chunks. Steps past the last used chunk are
-skipped (`lax.cond`), so an over-provisioned budget costs little; each step is
-rematerialised in the backward pass (`jax.checkpoint`), so memory stays bounded by one step.
+The loop runs over steps of `chunks_per_step` chunks; each step is rematerialised in the
+backward pass (`jax.checkpoint`), so memory stays bounded by one step. With
+`settings.skip_unused_steps` (the default), steps past the last used chunk are skipped
+(`lax.cond`), so an over-provisioned budget costs little on a CPU. On a GPU the branch of
+a `lax.cond` is chosen by the host, which waits for the predicate each step (forward and
+backward); without it every step runs, wasting the work of the unused budget but never
+synchronising, and the loop is a fixed-trip scan.
 """
 
 import math
@@ -140,11 +144,15 @@ def composite(layout: TileLayout, means2d, conics, opacities, features, width, h
 
     return jax.lax.cond(step * steps_g < chunks_in_use, blend_step, skip, carry, x)
 
-  # Under vmap (M samples, many cameras) the skip test must stay a real branch, not a
-  # select that computes every step: it uses the largest chunk count in the batch.
-  chunks_in_use = _max_over_batch(layout.num_chunks)
+  if settings.skip_unused_steps:
+    # Under vmap (M samples, many cameras) the skip test must stay a real branch, not a
+    # select that computes every step: it uses the largest chunk count in the batch.
+    chunks_in_use = _max_over_batch(layout.num_chunks)
+    body = maybe_blend
+  else:
+    body = lambda carry, inputs: blend_step(carry, inputs[1])
   init = (jnp.int32(-1), jnp.zeros((ts * ts,), dtype))
-  _, (blended, coverage) = jax.lax.scan(maybe_blend, init, (step_ids, xs))
+  _, (blended, coverage) = jax.lax.scan(body, init, (step_ids, xs))
 
   # Chunks -> tiles (unused chunks carry tile id num_tiles and land in a dropped row).
   chunk_tile = layout.chunk_tile

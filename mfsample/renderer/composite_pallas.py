@@ -23,7 +23,10 @@ pixel blended behind it,
 and the chain rule through alpha = min(alpha_max, o exp(power)) gives the opacity, centre
 and conic gradients. T_i is recovered from the pixel's final transmittance, subtracting
 log(1 - alpha) going back (as 3DGS divides by 1 - alpha); S_i is a suffix sum. The forward
-pass saves per pixel only the final log-transmittance and how many list entries it blended.
+pass saves per pixel only the final log-transmittance and the list position just after the
+last entry the pixel blended with alpha >= alpha_min (gsplat's per-pixel last index): the
+entries behind it add nothing to the pixel nor to any gradient, so each tile's backward
+walk starts at the largest such position over its pixels, not at the end of its list.
 Each program writes the gradient rows of its own chunks ([B, 6, C] geometry, [B, F, C]
 features; one owner per row, no race); jnp's gather transposes them into per-Gaussian sums.
 
@@ -75,6 +78,7 @@ class KernelParams(NamedTuple):
   alpha_min: float
   log_t_min: float  # log(transmittance_min)
   cut: float  # -radius_sigma^2 / 2: the rule's cap, on the exponent
+  warps: int = 0  # RenderSettings.pallas_warps; 0: automatic
 
   @property
   def pixels(self):
@@ -82,9 +86,9 @@ class KernelParams(NamedTuple):
 
   @property
   def num_warps(self):
-    # One warp per 32 pixels of the tile (16 x 16 -> 8 warps, as CUDA 3DGS runs 256
-    # threads a tile); not tuned on a GPU yet. chunk_size sets the block's other side.
-    return max(1, min(8, self.pixels // 32))
+    # Automatic: one warp per 32 pixels of the tile (16 x 16 -> 8 warps, as CUDA 3DGS runs
+    # 256 threads a tile). chunk_size sets the block's other side.
+    return self.warps or max(1, min(8, self.pixels // 32))
 
 
 def composite_pallas(layout: TileLayout, means2d, conics, opacities, features, width, height,
@@ -97,7 +101,7 @@ def composite_pallas(layout: TileLayout, means2d, conics, opacities, features, w
       chunk_size=settings.chunk_size, width=width, height=height,
       alpha_max=settings.alpha_max, alpha_min=settings.alpha_min,
       log_t_min=math.log(settings.transmittance_min),
-      cut=-0.5 * settings.radius_sigma ** 2)
+      cut=-0.5 * settings.radius_sigma ** 2, warps=settings.pallas_warps)
   dtype = features.dtype
   geometry = jnp.concatenate([means2d, conics, opacities[:, None]], axis=-1).astype(dtype)
   geometry = jnp.swapaxes(chunk_values(layout, geometry), 1, 2)  # [B, 6, C]
@@ -178,7 +182,7 @@ def _forward(params, first, count, geometry, features):
   out_shape = (jax.ShapeDtypeStruct((t, f, p), dtype),  # blended features
                jax.ShapeDtypeStruct((t, p), dtype),  # coverage, sum of weights
                jax.ShapeDtypeStruct((t, p), dtype),  # log T after the last blended entry
-               jax.ShapeDtypeStruct((t, p), jnp.int32))  # list entries blended
+               jax.ShapeDtypeStruct((t, p), jnp.int32))  # position after the last blended
   return _pallas(_forward_kernel, params, out_shape, (first, count, geometry, features))
 
 
@@ -244,6 +248,7 @@ def _exclusive_cumsum(x):
 def _forward_kernel(params, first_ref, count_ref, geometry_ref, features_ref,
                     blended_ref, coverage_ref, log_t_ref, blended_count_ref):
   tile = pl.program_id(0)
+  slot = jax.lax.broadcasted_iota(jnp.int32, (1, params.chunk_size), 1)
   num_features = features_ref.shape[1]
   dtype = features_ref.dtype
   px, py, inside = _pixel_centres(params, tile, dtype)
@@ -259,7 +264,7 @@ def _forward_kernel(params, first_ref, count_ref, geometry_ref, features_ref,
   def blend_chunk(state):
     # log_t_all sums log(1 - alpha) over every entry so far (as the jnp compositor's
     # carry); log_t_blended only over the entries the pixel blended (the residual).
-    i, log_t_all, log_t_blended, num_blended, coverage, blended = state
+    i, log_t_all, log_t_blended, last, coverage, blended = state
     chunk = first + i
     c = _chunk_alpha(params, geometry_ref, chunk, px, py)
     log_keep = jnp.log1p(-c.alpha)  # >= log(1 - alpha_max): finite
@@ -270,18 +275,23 @@ def _forward_kernel(params, first_ref, count_ref, geometry_ref, features_ref,
                     for k, acc in enumerate(blended))
     return (i + 1, log_t_all + jnp.sum(log_keep, axis=1),
             log_t_blended + jnp.sum(jnp.where(include, log_keep, 0.0), axis=1),
-            num_blended + jnp.sum(include.astype(jnp.int32), axis=1),
+            # Blended with alpha >= alpha_min (kept): entries not kept have alpha 0, no
+            # weight and no gradient. `include` is a prefix of the list, so every entry
+            # before `last` was blended.
+            jnp.maximum(last, jnp.max(jnp.where(include & c.kept,
+                                                (i * params.chunk_size + 1) + slot, 0),
+                                      axis=1)),
             coverage + jnp.sum(weight, axis=1), blended)
 
   init = (jnp.int32(0), zeros, zeros, jnp.zeros((params.pixels,), jnp.int32), zeros,
           (zeros,) * num_features)
-  _, _, log_t_blended, num_blended, coverage, blended = jax.lax.while_loop(
+  _, _, log_t_blended, last, coverage, blended = jax.lax.while_loop(
       pixels_open, blend_chunk, init)
   for k in range(num_features):
     blended_ref[tile, k, :] = blended[k]
   coverage_ref[tile, :] = coverage
   log_t_ref[tile, :] = log_t_blended
-  blended_count_ref[tile, :] = num_blended
+  blended_count_ref[tile, :] = last
 
 
 def _backward_kernel(params, first_ref, count_ref, geometry_ref, features_ref, log_t_ref,
@@ -294,10 +304,11 @@ def _backward_kernel(params, first_ref, count_ref, geometry_ref, features_ref, l
   chunk_size = params.chunk_size
   px, py, _ = _pixel_centres(params, tile, dtype)
   first, count = first_ref[tile], count_ref[tile]
-  num_blended = blended_count_ref[tile, :]  # [P]: the pixel blended list entries [0, n)
+  num_blended = blended_count_ref[tile, :]  # [P]: entries [0, n) hold all the pixel blended
   g_features = [d_blended_ref[tile, k, :][:, None] for k in range(num_features)]  # [P, 1]
   g_coverage = d_coverage_ref[tile, :][:, None]
-  # Chunks past the last entry any pixel blended get no gradient (their rows stay 0).
+  # Chunks past the last entry any pixel blended get no gradient (their rows stay 0): the
+  # walk back starts at the chunk of the tile's largest last index.
   end = jnp.minimum(count, jax.lax.div(jnp.max(num_blended) + chunk_size - 1,
                                        jnp.int32(chunk_size)))
   slot = jax.lax.broadcasted_iota(jnp.int32, (1, chunk_size), 1)

@@ -4,12 +4,17 @@ Zwicker et al. 2002 (EWA splatting), as used by 3DGS (Kerbl et al. 2023, Sec. 4)
 Sigma_3d = R S S^T R^T, Sigma_2d = J W Sigma_3d W^T J^T + eps2d I, with W the world-to-camera
 rotation and J the Jacobian of the perspective map at the Gaussian's centre.
 
-The screen footprint of a Gaussian of opacity o is the disc of radius r(o) sqrt(lambda_max)
-pixels, lambda_max the largest eigenvalue of Sigma_2d and
+The screen footprint of a Gaussian of opacity o is the ellipse {d <= r(o)}, d the
+Mahalanobis distance under Sigma_2d and
 
   r(o) = min(radius_sigma, sqrt(2 ln(o / alpha_min)))  (Mahalanobis units),
 
 the distance beyond which its alpha o exp(-r^2 / 2) falls below alpha_min (3DGS, gsplat).
+It lies in the disc of radius r(o) sqrt(lambda_max) pixels (lambda_max the largest
+eigenvalue of Sigma_2d: `Projected.radii`) and, tighter, in the axis-aligned box of
+half-widths r(o) sqrt(Sigma_2d[0, 0]) and r(o) sqrt(Sigma_2d[1, 1]) (`Projected.extents`;
+the extremes of x and y over the ellipse), which decides the tiles it is listed in, as in
+gsplat.
 """
 
 from typing import NamedTuple
@@ -34,6 +39,9 @@ class Projected(NamedTuple):
   depths: chex.Array  # [N] camera-space z
   radii: chex.Array  # [N] screen radius in pixels of the footprint (no gradient), 0 if culled
   valid: chex.Array  # [N] bool: in front of the near plane, live, on screen
+  # [N, 2] half-widths in pixels (x, y) of the footprint's bounding box, <= radii (no
+  # gradient), 0 if culled: the tile lists use it.
+  extents: chex.Array
 
 
 def quat_to_rotmat(quats):
@@ -130,7 +138,12 @@ def project_gaussians(means, scales, quats, opacities, mask, camera, settings):
   a_s, c_s, det_s = jax.lax.stop_gradient((a, c, det_safe))
   mid = 0.5 * (a_s + c_s)
   lambda_max = mid + jnp.sqrt(jnp.maximum(mid * mid - det_s, 0.0))
-  radii = footprint_sigma(opacities, settings) * jnp.sqrt(jnp.maximum(lambda_max, 0.0))
+  sigma = footprint_sigma(opacities, settings)
+  radii = sigma * jnp.sqrt(jnp.maximum(lambda_max, 0.0))
+  # The box around the ellipse x^T Sigma^-1 x <= r^2: |x| <= r sqrt(a), |y| <= r sqrt(c).
+  # min(., radii): the same in exact arithmetic (a, c <= lambda_max), never above in float.
+  extents = jnp.minimum(sigma[:, None] * jnp.sqrt(jnp.maximum(jnp.stack([a_s, c_s], -1), 0.0)),
+                        radii[:, None])
   u_s, v_s = jax.lax.stop_gradient((u, v))
   on_screen = ((u_s + radii > 0) & (u_s - radii < width)
                & (v_s + radii > 0) & (v_s - radii < height))
@@ -142,8 +155,9 @@ def project_gaussians(means, scales, quats, opacities, mask, camera, settings):
   means2d = jnp.where(valid[:, None], jnp.stack([u, v], axis=-1), 0.0)
   conics = jnp.where(valid[:, None], conics, 0.0)
   radii = jnp.where(valid, radii, 0.0)
+  extents = jnp.where(valid[:, None], extents, 0.0)
   depths = jnp.where(valid, z, 0.0)
-  return Projected(means2d, conics, depths, radii, valid)
+  return Projected(means2d, conics, depths, radii, valid, extents)
 
 
 def view_directions(means, camera):

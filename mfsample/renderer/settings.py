@@ -6,6 +6,7 @@ from mfsample import arg_checks
 
 COMPOSITORS = ("jnp", "pallas")
 SEARCHSORTED_METHODS = ("scan", "scan_unrolled", "sort", "compare_all")
+PALLAS_WARPS = (0, 1, 2, 4, 8, 16, 32)  # 0: automatic
 
 
 @dataclasses.dataclass(frozen=True)
@@ -18,9 +19,8 @@ class RenderSettings:
     d(p) <= r(o) = min(radius_sigma, sqrt(2 ln(o / alpha_min))),
 
   which is exactly where its alpha o exp(-d^2 / 2) is >= alpha_min, up to the cap
-  `radius_sigma`. Its screen footprint, which decides the tiles it is listed in, has the
-  same radius r(o) sqrt(lambda_max) (lambda_max: the largest eigenvalue of its 2D
-  covariance), so the image does not depend on `tile_size`.
+  `radius_sigma`. The tiles it is listed in are those its footprint {d <= r(o)} touches
+  (through the footprint's bounding box), so the image does not depend on `tile_size`.
 
   Attributes:
     tile_size: side of a square screen tile in pixels.
@@ -48,6 +48,14 @@ class RenderSettings:
       the Pallas interpreter on a CPU). Its tile_size and chunk_size must be powers of two.
     searchsorted_method: `jnp.searchsorted`'s method in the tile intersection ("scan",
       "scan_unrolled", "sort", "compare_all"); a speed knob with identical results.
+    skip_unused_steps: the jnp compositor skips the loop steps past the last chunk in use
+      (a `lax.cond` per step). It saves the work of an over-provisioned budget, but on a
+      GPU the host reads each step's predicate, a round trip per step; False runs every
+      step without one. A speed knob: the results are identical.
+    pallas_warps: Triton warps per program (tile) of the Pallas kernels: 0 (one warp per 32
+      pixels of the tile, at most 8) or a power of two up to 32. With chunk_size it sets how
+      many elements of each [tile pixels, chunk] block a thread holds. A speed knob (GPU
+      only): the results are identical.
   """
 
   tile_size: int = 16
@@ -62,6 +70,8 @@ class RenderSettings:
   chunks_per_step: int = 16
   compositor: str = "jnp"
   searchsorted_method: str = "scan"
+  skip_unused_steps: bool = True
+  pallas_warps: int = 0
 
   def __post_init__(self):
     # Types and finiteness first: NaN passes every comparison below unnoticed (a NaN
@@ -96,6 +106,8 @@ class RenderSettings:
       # need block sides that are powers of two.
       raise ValueError("the pallas compositor needs tile_size and chunk_size to be powers "
                        f"of two, got {self.tile_size} and {self.chunk_size}")
+    if self.pallas_warps not in PALLAS_WARPS:
+      raise ValueError(f"pallas_warps must be one of {PALLAS_WARPS}, got {self.pallas_warps!r}")
     if self.searchsorted_method not in SEARCHSORTED_METHODS:
       raise ValueError(f"searchsorted_method must be one of {SEARCHSORTED_METHODS}, got "
                        f"{self.searchsorted_method!r}")

@@ -1,7 +1,7 @@
 """Stage 2: tile intersection, sorted by tile then depth, laid out in fixed-size chunks.
 
-Every screen-space Gaussian is paired with the tiles its bounding square overlaps (the square
-around its footprint, of radius `Projected.radii`: `mfsample.renderer.projection`). The
+Every screen-space Gaussian is paired with the tiles its footprint's bounding box overlaps
+(half-widths `Projected.extents`: `mfsample.renderer.projection`). The
 pairs are generated in front-to-back order (Gaussians are depth-sorted first) and stably
 sorted by tile, so each tile's list is depth-ordered. Each tile's list is then padded to a
 multiple of `chunk_size` so that a chunk belongs to exactly one tile: the compositor then
@@ -42,23 +42,23 @@ def tile_grid(width, height, tile_size):
   return -(-width // tile_size), -(-height // tile_size)
 
 
-def tile_bounds(means2d, radii, width, height, tile_size):
-  """Inclusive-exclusive tile ranges [x0, x1) x [y0, y1) of each Gaussian's bounding square.
+def tile_bounds(means2d, extents, width, height, tile_size):
+  """Inclusive-exclusive tile ranges [x0, x1) x [y0, y1) of each Gaussian's bounding box.
 
-  The square covers every pixel centre (j + 0.5, i + 0.5) within `radii` of the mean, plus
-  half a pixel of slack for rounding.
+  The box covers every pixel centre (j + 0.5, i + 0.5) within `extents` [N, 2] (x and y
+  half-widths) of the mean, plus half a pixel of slack for rounding.
   """
   tiles_x, tiles_y = tile_grid(width, height, tile_size)
-  r = radii + 0.5
-  u, v = means2d[:, 0], means2d[:, 1]
+  r = extents + 0.5
 
-  def lo(c, n):
+  def lo(c, r, n):
     return jnp.clip(jnp.floor((c - r - 0.5) / tile_size), 0, n).astype(jnp.int32)
 
-  def hi(c, n):
+  def hi(c, r, n):
     return jnp.clip(jnp.floor((c + r - 0.5) / tile_size) + 1, 0, n).astype(jnp.int32)
 
-  return lo(u, tiles_x), hi(u, tiles_x), lo(v, tiles_y), hi(v, tiles_y)
+  u, v, ru, rv = means2d[:, 0], means2d[:, 1], r[:, 0], r[:, 1]
+  return lo(u, ru, tiles_x), hi(u, ru, tiles_x), lo(v, rv, tiles_y), hi(v, rv, tiles_y)
 
 
 def intersect_tiles(projected, width, height, settings):
@@ -78,9 +78,9 @@ def intersect_tiles(projected, width, height, settings):
   max_chunks = settings.max_chunks
   max_pairs = settings.max_intersections
 
-  means2d, radii, depths, valid = jax.lax.stop_gradient(
-      (projected.means2d, projected.radii, projected.depths, projected.valid))
-  x0, x1, y0, y1 = tile_bounds(means2d, radii, width, height, tile_size)
+  means2d, extents, depths, valid = jax.lax.stop_gradient(
+      (projected.means2d, projected.extents, projected.depths, projected.valid))
+  x0, x1, y0, y1 = tile_bounds(means2d, extents, width, height, tile_size)
   span_x = jnp.maximum(x1 - x0, 0)
   counts = jnp.where(valid, span_x * jnp.maximum(y1 - y0, 0), 0)
 
