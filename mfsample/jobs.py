@@ -255,7 +255,7 @@ def main(job: Job):
     except USER_ERRORS as e:
       print(f"{job.name}: {type(e).__name__}: {e}", file=sys.stderr)
       sys.exit(2)
-    if job.report is not None:
+    if job.report is not None and distributed.is_writer():  # (it reads what process 0 wrote)
       print(job.report(results, workdir))
 
   app.run(run)

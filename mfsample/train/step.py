@@ -200,7 +200,7 @@ def _mask_rows(tree, mask):
 def step_z(cfg, model, key, position, step, sobol_rows):
   """z [M, k] of the target at `position` of the target order, in step `step`.
 
-  The step's Sobol rows (or fresh uniforms from `fold_in(key, position)`, per
+  The target's Sobol rows (or fresh uniforms from `fold_in(key, position)`, per
   `samplers.draw_z`), zero from `stochastic_until` on (the mean is rendered). With one
   target per step, position = step.
   """
