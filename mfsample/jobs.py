@@ -15,6 +15,13 @@ results, and how its command line reports them. A job's `run` opens its workdir 
 
 and `main(JOB)` is the whole absl entry point (`--config`, `--workdir`). A new experiment is
 a config, a few pure functions, a `Job` and a thin main.
+
+Several processes (`mfsample.distributed`, initialised by `main` from the environment) run
+one job on one workdir, all reading it; only process 0 writes it (`Workdir.writes`: the
+`Workdir` methods write nothing in the others, and a job gates its other outputs, images
+and figures, on it), and only process 0 holds the lock and checks the workdir, passing
+its verdict on to the others, which refuse to start with a config that differs from
+process 0's.
 """
 
 import contextlib
@@ -28,7 +35,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from mfsample import interrupts
+from mfsample import distributed, interrupts
 from mfsample import workdir as workdir_lib
 from mfsample._json import atomic_path, write_json, write_text
 from mfsample.config_checks import ConfigError
@@ -60,12 +67,18 @@ class Job:
 
 
 class Workdir:
-  """The workdir of one call of a job: paths, atomic writes, checked reads, progress bars."""
+  """The workdir of one call of a job: paths, atomic writes, checked reads, progress bars.
+
+  Attributes:
+    writes: whether this process writes the workdir (process 0 of a multi-process run; the
+      writing methods do nothing in the others, and so should a job's own writes).
+  """
 
   def __init__(self, job: Job, config, path):
     self.job = job
     self.config = config
     self.path = os.fspath(path)
+    self.writes = distributed.is_writer()
 
   def file(self, *parts):
     """The path of an entry of the workdir."""
@@ -76,15 +89,19 @@ class Workdir:
 
   def write_config(self):
     """Records the config beside the results (after the guard and the data loaded)."""
+    if not self.writes:
+      return
     os.makedirs(self.path, exist_ok=True)
     workdir_lib.write_config(self.config, self.path)
 
   def write_json(self, name, obj, indent=1):
     """Writes `obj` as JSON to the entry `name`, atomically."""
-    write_json(self.file(name), obj, indent=indent)
+    if self.writes:
+      write_json(self.file(name), obj, indent=indent)
 
   def write_text(self, name, text):
-    write_text(self.file(name), text)
+    if self.writes:
+      write_text(self.file(name), text)
 
   def read_json(self, name):
     """The JSON content of the entry `name`; None when it is absent or damaged.
@@ -107,6 +124,8 @@ class Workdir:
 
   def save_arrays(self, name, **arrays):
     """Writes `arrays` as a compressed .npz to the entry `name`, atomically."""
+    if not self.writes:
+      return
     with atomic_path(self.file(name)) as tmp:
       np.savez_compressed(tmp, **arrays)
 
@@ -129,13 +148,14 @@ class Workdir:
     return arrays
 
   def progress(self, total, desc=None, **kwargs):
-    """A tqdm progress bar, shown when the config's progress flag is set."""
+    """A tqdm progress bar, shown when the config's progress flag is set (by process 0)."""
     from tqdm.auto import tqdm
 
     from mfsample.config_checks import get_field
 
     return tqdm(total=total, desc=desc or self.job.name, dynamic_ncols=True,
-                disable=not get_field(self.config, self.job.progress_field), **kwargs)
+                disable=not (self.writes and get_field(self.config, self.job.progress_field)),
+                **kwargs)
 
 
 def check_workdir(job: Job, config, workdir):
@@ -161,16 +181,31 @@ def open_workdir(job: Job, config, workdir):
 
   Nothing is written but the lock (`workdir/.lock`, removed at the end, with the folder if
   the block leaves it empty): the job records its config (`Workdir.write_config`) once its
-  data are loaded.
+  data are loaded. In a multi-process run every process must pass the same config; process
+  0 takes the lock and checks the workdir, and the others start only if it succeeded.
 
   Raises:
     mfsample.config_checks.ConfigError: a field is invalid (named).
     mfsample.workdir.WorkdirBusyError: another process holds the workdir (named).
     mfsample.workdir.WorkdirError: see `check_workdir`.
+    mfsample.distributed.DistributedError: the processes' configs differ, or (in the
+      others) process 0 refused the workdir.
   """
   job.validate(config)
-  with workdir_lib.locked(workdir, job.name):
-    check_workdir(job, config, workdir)
+  distributed.check_same_everywhere(
+      json.dumps(workdir_lib.config_dict(config), sort_keys=True), f"the {job.name} config")
+  if not distributed.is_writer():
+    distributed.share_outcome(None)  # raises process 0's refusal
+    yield Workdir(job, config, workdir)
+    return
+  with contextlib.ExitStack() as stack:
+    try:
+      stack.enter_context(workdir_lib.locked(workdir, job.name))
+      check_workdir(job, config, workdir)
+    except Exception as e:
+      distributed.share_outcome(e)
+      raise
+    distributed.share_outcome(None)
     yield Workdir(job, config, workdir)
 
 
@@ -195,6 +230,11 @@ def main(job: Job):
   def run(argv):
     if len(argv) > 1:
       raise app.UsageError(f"Unexpected arguments: {argv[1:]}")
+    try:  # before anything runs on a device
+      distributed.initialize_from_environment()
+    except distributed.DistributedError as e:
+      print(f"{job.name}: {e}", file=sys.stderr)
+      sys.exit(2)
     workdir = workdir_flag.value
     resume = f"run the same command again to resume (the workdir {workdir} keeps the work done)"
 
@@ -215,7 +255,7 @@ def main(job: Job):
     except USER_ERRORS as e:
       print(f"{job.name}: {type(e).__name__}: {e}", file=sys.stderr)
       sys.exit(2)
-    if job.report is not None:
+    if job.report is not None and distributed.is_writer():  # (it reads what process 0 wrote)
       print(job.report(results, workdir))
 
   app.run(run)
@@ -223,4 +263,4 @@ def main(job: Job):
 
 # Errors in the user's input whose message says all: `main` prints it without a traceback.
 USER_ERRORS = (ConfigError, DatasetError, workdir_lib.WorkdirError,
-               workdir_lib.WorkdirBusyError)
+               workdir_lib.WorkdirBusyError, distributed.DistributedError)

@@ -17,12 +17,13 @@ from configs import train as train_configs
 from mfsample import _bench
 
 SCRIPTS = {name: import_script(name) for name in (
-    "train_step", "candidate_scoring", "train_quality", "tradeoffs", "capture")}
+    "train_step", "candidate_scoring", "train_quality", "tradeoffs", "capture", "scaling")}
 train_step = SCRIPTS["train_step"][0]
 candidate_scoring = SCRIPTS["candidate_scoring"][0]
 train_quality = SCRIPTS["train_quality"][0]
 tradeoffs = SCRIPTS["tradeoffs"][0]
 capture = SCRIPTS["capture"][0]
+scaling = SCRIPTS["scaling"][0]
 
 
 def tiny_base():
@@ -46,7 +47,7 @@ def test_outputs_default_to_the_ignored_workdirs_folder():
   paths = {f"{script}.{flag}": default for script, (_, defaults) in SCRIPTS.items()
            for flag, default in defaults.items()
            if flag in ("out", "plot", "workdir", "train_step", "stochastic", "deterministic")}
-  assert len(paths) == 10
+  assert len(paths) == 11
   assert all(p.startswith("workdirs/benchmarks/") for p in paths.values()), paths
   data = {s: d["data"] for s, (_, d) in SCRIPTS.items() if "data" in d}
   assert data == dict.fromkeys(("train_step", "train_quality", "tradeoffs"),
@@ -257,3 +258,29 @@ def test_capture_times_every_spp_and_reads_the_pool_back_from_its_cache(tmp_path
   cached = [f for _, _, files in os.walk(tmp_path) for f in files if f.endswith(".npz")]
   assert len(cached) == 3  # every view was stored by the first pass ...
   assert pool["cached_seconds"] < pool["seconds"]  # ... and read, not rendered, by the second
+
+
+# ------------------------------------------------------------------ scaling.py
+
+
+def test_scaling_ratios_are_taken_within_rounds():
+  # Two rounds; in the second the whole machine is twice as slow: the ratios hold.
+  times = {1: [(1.0, 1.0), (2.0, 2.0)], 2: [(0.6, 1.1), (1.2, 2.2)]}
+  table = scaling.summarize(times, items=8)
+  assert table[1]["speedup"] == 1.0 and table[1]["cpu_ratio"] == 1.0
+  assert table[2]["speedup"] == pytest.approx(1 / 0.6)
+  assert table[2]["cpu_ratio"] == pytest.approx(1.1)
+  assert table[2]["per_second"] == pytest.approx(8 / 0.9)  # items / median wall-clock
+  assert table[2]["wall_rounds"] == [0.6, 1.2]
+
+
+@pytest.mark.slow
+def test_scaling_measures_scoring_and_a_training_step_per_device_count():
+  config, dataset, setup, state = scaling.setup_run(batch_size=2, resolution=16, points=64)
+  assert setup.step_config.batch_size == 2 and state.model.num_live == 64
+  score, budget = scaling.scoring([1], state.model, resolution=16, num_candidates=2,
+                                  samples=2, rounds=2)
+  assert budget >= 512 and score[1]["speedup"] == 1.0 and len(score[1]["wall_rounds"]) == 2
+  assert score[1]["per_second"] > 0 and score[1]["cpu_seconds"] > 0
+  train, _ = scaling.training([1], config, dataset, setup, state, rounds=2)
+  assert train[1]["per_second"] > 0 and len(train[1]["cpu_rounds"]) == 2

@@ -86,3 +86,32 @@ def test_progress_bars_follow_the_jobs_flag(tmp_path):
   bar = jobs.Workdir(JOB, config, str(tmp_path)).progress(3)
   assert not bar.disable
   bar.close()
+
+
+def test_a_process_other_than_the_first_reads_the_workdir_and_writes_nothing(tmp_path,
+                                                                               monkeypatch):
+  """In a multi-process run (`mfsample.distributed`) only process 0 writes: the others take
+  no lock, write no config, record, array or checkpoint, and read what process 0 wrote."""
+  from mfsample import distributed
+  from mfsample.train import checkpoint as ckpt
+
+  workdir = tmp_path / "w"
+  assert _run(_config(), str(workdir)) == {"value": 6}  # process 0's earlier run
+  before = {p: p.read_bytes() for p in workdir.rglob("*") if p.is_file()}
+  monkeypatch.setattr(distributed, "is_writer", lambda: False)
+  with jobs.open_workdir(JOB, _config(), str(workdir)) as wd:
+    assert not wd.writes and not (workdir / ".lock").exists()
+    assert wd.read_json("runs/a.json") == {"value": 6}
+    wd.write_config()
+    wd.write_json("runs/b.json", {"x": 1})
+    wd.write_text("table.md", "x")
+    wd.save_arrays("arrays.npz", a=np.zeros(2))
+    path = ckpt.save_checkpoint(wd.file("checkpoints"), {"w": np.ones(2)}, {"step": 1})
+    assert path.endswith("ckpt_00000001.npz")
+    assert wd.progress(3).disable
+  after = {p: p.read_bytes() for p in workdir.rglob("*") if p.is_file()}
+  assert after == before
+  fresh = tmp_path / "fresh"
+  with jobs.open_workdir(JOB, _config(), str(fresh)) as wd:
+    wd.write_config()
+  assert not fresh.exists()

@@ -128,6 +128,39 @@ def test_densification_moves_transfer_rows_with_their_gaussians():
   assert new.model.params.spread["transfer_dc"].shape[1:] == (1, N, 3, 2)
 
 
+@pytest.mark.slow
+def test_a_batch_of_light_view_pairs_trains_like_its_pairs_one_by_one():
+  """The relightable field with B = 2 (light, view) pairs per step (`train.step`'s batch):
+  the data term is the mean of the two pairs' single steps' and the densification counts
+  add up."""
+  import dataclasses
+
+  from mfsample.train import step as step_lib
+
+  config = tiny()
+  data = tiny_data()
+  setup = training.make_setup(config, data.train_cameras, 100)
+  state = training.init_state(config, setup, data.bounds)
+  used = np.eye(N)[:2] * lights.UNIFORM_NORM
+  images = jnp.asarray(np.stack([captures.capture(data.train_basis, x) for x in used]))
+  inputs = (images, jnp.asarray(used, jnp.float32), cameras())
+  pairs = [(0, 1), (1, 2)]  # (light slot, view)
+  rows = setup.sobol[:2]
+  one = step_lib.make_train_step(setup.step_config, setup.field)
+  singles = [one(state, inputs, (jnp.int32(light), jnp.int32(view)), rows[i:i + 1])
+             for i, (light, view) in enumerate(pairs)]
+  batch_cfg = dataclasses.replace(setup.step_config, batch_size=2)
+  batch = step_lib.make_train_step(batch_cfg, setup.field)
+  index = tuple(jnp.asarray(x, jnp.int32) for x in zip(*pairs, strict=True))
+  new, metrics = batch(state, inputs, index, rows.reshape(2, 1, -1))
+  assert not bool(metrics.overflow) and int(new.step) == 1
+  np.testing.assert_allclose(float(metrics.data_loss),
+                             np.mean([float(m.data_loss) for _, m in singles]), rtol=1e-6)
+  np.testing.assert_array_equal(new.stats.count,
+                                singles[0][0].stats.count + singles[1][0].stats.count)
+  assert int(np.sum(new.stats.count)) > 0
+
+
 # ------------------------------------------------------------------ U over lights
 
 

@@ -1,5 +1,7 @@
 """Tests of the training step, densification, the loop, checkpoints and resumption."""
 
+import dataclasses
+import functools
 import json
 import os
 
@@ -19,6 +21,7 @@ from mfsample.train import checkpoint as ckpt
 from mfsample.train import densify as densify_lib
 from mfsample.train import evaluate as eval_lib
 from mfsample.train import loop, losses
+from mfsample.train import step as step_lib
 from mfsample.train.config import SPEED_ONLY_FIELDS
 from mfsample.train.experiment import train_and_evaluate
 from mfsample.train.step import make_train_step
@@ -372,3 +375,71 @@ def test_saving_no_images_writes_nothing(tiny_dataset, tmp_path):
   result = eval_lib.EvalResult({}, {}, images, np.ones(images.shape[:3], np.float32))
   eval_lib.save_images(str(tmp_path / "images"), result, views, num=0)
   assert not (tmp_path / "images").exists()
+
+
+# ------------------------------------------------------------------ batches of views
+
+
+def test_a_batch_takes_the_views_and_rows_of_consecutive_single_view_steps(runs):
+  """Step t of a batch of B uses the views and Sobol rows of a B = 1 run's steps
+  tB .. tB + B - 1; B = 1 is the B = 1 run's pick itself."""
+  seed, n = 0, 12
+  assert int(loop.views_for_step(seed, 5, n, 1)) == loop.view_for_step(seed, 5, n)
+  np.testing.assert_array_equal(loop.views_for_step(seed, 5, n, 3),
+                                [loop.view_for_step(seed, p, n) for p in (15, 16, 17)])
+  config = tiny_config("lowrank", **{"train.batch_size": 3, "sampler.num_samples": 2})
+  setup = loop.make_setup(config, runs["lowrank"].views)
+  assert setup.sobol.shape == (40 * 3 * 2, 2)  # steps x B x M rows of k = 2
+  rows = loop.step_sobol(setup, 5)
+  np.testing.assert_array_equal(rows, setup.sobol[30:36].reshape(3, 2, 2))
+  assert setup.step_config.batch_size == 3 and setup.step_config.num_devices == 1
+  one = runs["lowrank"].setup
+  assert one.step_config.num_devices == 1 and loop.step_sobol(one, 5).shape == (1, 2)
+
+
+@pytest.mark.slow
+def test_batch_gradients_are_the_mean_of_the_views_and_stats_those_of_consecutive_steps(
+    runs, tiny_dataset):
+  """B = 2 (the definitions of `mfsample.train.step`): the data term and the gradient are the
+  means of the two views' (each view's gradient taken directly, through the renderer); the
+  densification statistics are those the two views add as two single-view steps at the same
+  parameters (counts and radii exactly, NDC gradient norms to float rounding)."""
+  run = runs["lowrank"]
+  cfg = dataclasses.replace(run.setup.step_config, batch_size=2, num_devices=1)
+  state = run.state0
+  data = (run.views.images, run.views.cameras)
+  views = [loop.view_for_step(run.setup.seed, p, len(run.views)) for p in (0, 1)]
+  rows = run.setup.sobol[:2]  # M = 1: one row per position
+  batch = jax.jit(functools.partial(step_lib.batch_gradients, cfg=cfg))(
+      state, data, jnp.asarray(views, jnp.int32), rows.reshape(2, 1, -1))
+  assert not bool(batch.overflow)
+
+  model = state.model
+  settings, background = cfg.settings, jnp.asarray(cfg.background)
+
+  def view_loss(params, view, z):
+    m = model.replace(params=params)
+    out = render(samplers.sample(m, z), run.views.cameras[view], background=background,
+                 settings=settings)
+    return losses.photometric(out.rgb, run.views.images[view], cfg.ssim_weight)
+
+  grad_fn = jax.jit(jax.value_and_grad(view_loss))
+  per_view = [grad_fn(model.params, v, jnp.asarray(rows[i])) for i, v in enumerate(views)]
+  np.testing.assert_allclose(float(batch.data_loss),
+                             np.mean([float(loss) for loss, _ in per_view]), rtol=1e-6)
+  assert float(batch.volume) > 0 and float(batch.loss) == float(batch.data_loss)  # step 0
+  mean_grads = jax.tree.map(lambda a, b: (a + b) / 2, per_view[0][1], per_view[1][1])
+  for got, want in zip(jax.tree.leaves(batch.grads), jax.tree.leaves(mean_grads), strict=True):
+    got, want = np.asarray(got), np.asarray(want)
+    assert np.max(np.abs(got - want)) <= 1e-5 * np.max(np.abs(want))
+
+  # Two single-view steps from the same state: what each adds to the statistics.
+  singles = [run.fn(state, data, jnp.int32(v), rows[i:i + 1])[0].stats
+             for i, v in enumerate(views)]
+  np.testing.assert_array_equal(batch.stats.count, singles[0].count + singles[1].count)
+  np.testing.assert_array_equal(batch.stats.max_radii,
+                                np.maximum(singles[0].max_radii, singles[1].max_radii))
+  np.testing.assert_allclose(batch.stats.grad_accum,
+                             singles[0].grad_accum + singles[1].grad_accum, rtol=1e-5,
+                             atol=1e-9)
+  assert np.all(np.asarray(singles[0].count) <= 1) and int(np.sum(batch.stats.count)) > 0

@@ -158,7 +158,9 @@ _SHARDED = textwrap.dedent("""
     four, _ = unc.score_cameras(m, cams, z, settings=s, num_devices=4)
     np.testing.assert_allclose(np.asarray(four.values), np.asarray(one.values), rtol=1e-5)
     from mfsample.sharding import default_num_devices
-    assert default_num_devices(6) == 4 and default_num_devices(2) == 2
+    # Every split uses all devices (one mesh), padded: 6 cameras on 4 devices, 2 padded.
+    assert default_num_devices(6) == 4 and default_num_devices(2) == 4
+    assert default_num_devices(1) == 1
     # The M samples of one camera split over devices (M = 3 padded to 4).
     z3 = unc.uncertainty_z(m, 3)
     a = unc.uncertainty(m, cams[0], z3, settings=s, num_devices=1)

@@ -301,7 +301,7 @@ def run_light_planning(config, workdir):
         "load_average": {"start": load_start, "end": list(os.getloadavg())},
         "jax_version": jax.__version__,
     }
-    if config.figures.enabled:
+    if config.figures.enabled and wd.writes:
       from mfsample.lighting import figures
       figures.write_figures(config, wd.path, results, ctx, predictions)
     results["seconds_this_call"] = time.perf_counter() - t_start

@@ -63,7 +63,7 @@ def run_next_views(config, workdir):
     result, kind = _train_or_fit(config, dataset, train_views, wd.file("checkpoints"))
     model, settings = result.state.model, result.setup.step_config.settings
     wd.write_json("train_log.json", result.history, indent=2)
-    if kind == "joint" and config.eval.export_ply:
+    if kind == "joint" and config.eval.export_ply and wd.writes:
       from mfsample.data.ply import export_ply
       export_ply(wd.file("point_cloud.ply"), model)
 
@@ -76,8 +76,11 @@ def run_next_views(config, workdir):
                     + np.asarray(dataset.bounds[1], np.float64))
     proposal = _propose(config, model, dataset, train_idx, unused_idx, center, z, budgets, wd)
     wd.write_json("next_views.json", proposal["record"], indent=2)
-    files, budgets = _viewer_files(config, model, dataset, proposal, z, budgets, wd)
-    if config.next_views.figure:
+    # Files only: the other processes of a multi-process run have nothing to compute here.
+    files = {}
+    if wd.writes:
+      files, budgets = _viewer_files(config, model, dataset, proposal, z, budgets, wd)
+    if config.next_views.figure and wd.writes:
       from mfsample.next_views.figure import next_views_figure
 
       shown = min(4, len(dataset.test))
@@ -159,7 +162,9 @@ def _test_maps(config, model, dataset, z, settings, wd):
                                   for e in per_view] for key in ("psnr", "ssim", "lpips")},
       images=np.concatenate([e.images for e in per_view]),
       uncertainty=np.concatenate([e.uncertainty for e in per_view]))
-  eval_lib.save_images(wd.file("test"), merged, dataset.test, num=int(config.eval.save_images))
+  if wd.writes:
+    eval_lib.save_images(wd.file("test"), merged, dataset.test,
+                         num=int(config.eval.save_images))
   u = merged.uncertainty.reshape(len(per_view), -1).sum(axis=1)
   metrics = {"psnr": float(np.mean(merged.per_view["psnr"])),
              "ssim": float(np.mean(merged.per_view["ssim"])),

@@ -479,10 +479,12 @@ def run_camera_planning(config, workdir):
     wd.write_text("table.md", tables.report_markdown(summary, paired, optimisation,
                                                      run_seconds, labels, eval_views, title))
     if config.figures.enabled:
-      figures.camera_figure(records, pool, wd.file("cameras.png"), seed=int(config.seeds[0]))
-      land, budgets = landscape(config, pool, trainer, budgets)
+      if wd.writes:
+        figures.camera_figure(records, pool, wd.file("cameras.png"), seed=int(config.seeds[0]))
+      land, budgets = landscape(config, pool, trainer, budgets)  # (every process computes)
       wd.save_arrays("landscape.npz", **land)
-      figures.landscape_figure(land, wd.file("landscape.png"))
+      if wd.writes:
+        figures.landscape_figure(land, wd.file("landscape.png"))
     results = {
         **pool_record(pool), "seeds": list(config.seeds), "strategies": names,
         "skipped_strategies": skipped, "eval_views": list(eval_views),

@@ -38,7 +38,7 @@ def run_uncertainty_quality(config, workdir):
           summary, scenes, f"## AUSE: {len(a.seeds)} seed(s), "
           f"{len(out['views'][scenes[0]][1])} test views per scene, mean over both"))
       figure_paths = {}
-      if config.figures.enabled:
+      if config.figures.enabled and wd.writes:
         for scene in scenes:
           figure_paths[scene] = figures.scene_figure(
               scene, out["views"][scene][1], out["records"], out["arrays"],

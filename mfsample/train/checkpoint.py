@@ -20,6 +20,7 @@ import zlib
 import jax
 import numpy as np
 
+from mfsample import distributed
 from mfsample._json import atomic_path
 
 _PATTERN = re.compile(r"^ckpt_(\d+)\.npz$")
@@ -43,6 +44,8 @@ def _flatten(tree):
 def save_checkpoint(directory, state, meta, keep=2):
   """Writes `ckpt_<step>.npz` atomically and keeps the newest `keep` checkpoints.
 
+  In a multi-process run only process 0 writes (every process holds the same state).
+
   Args:
     directory: folder (created if missing).
     state: a pytree (the `TrainState`).
@@ -53,13 +56,15 @@ def save_checkpoint(directory, state, meta, keep=2):
   """
   if isinstance(keep, bool) or not isinstance(keep, (int, np.integer)) or keep < 1:
     raise ValueError(f"keep = {keep!r}: must be an integer >= 1 (checkpoints to keep)")
-  os.makedirs(directory, exist_ok=True)
   step = int(meta["step"])
+  path = os.path.join(directory, f"ckpt_{step:08d}.npz")
+  if not distributed.is_writer():
+    return path
+  os.makedirs(directory, exist_ok=True)
   arrays = _flatten(state)
   if "__meta__" in arrays:
     raise ValueError("a state leaf may not be called __meta__")
   arrays["__meta__"] = np.asarray(json.dumps(meta))
-  path = os.path.join(directory, f"ckpt_{step:08d}.npz")
   with atomic_path(path) as tmp, open(tmp, "wb") as f:
     np.savez(f, **arrays)
   for old in list_checkpoints(directory)[:-int(keep)]:

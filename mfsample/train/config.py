@@ -158,6 +158,10 @@ def default_config():
   # ----------------------------------------------------------------- training
   config.train = train = ml_collections.ConfigDict()  # The loop.
   train.num_steps = 7_000  # Optimisation steps (3DGS: 30k; the planning protocol: 2000).
+  # Views per step (data-parallel: split over the devices of every process, gradients
+  # averaged, docs/scaling.md). The schedules count steps, so B > 1 sees B times as many
+  # views in num_steps; 1 is the single-view step of 3DGS.
+  train.batch_size = 1
   train.checkpoint_every = 500  # Checkpoint period in steps (and at the end).
   train.keep_checkpoints = 2  # Older checkpoints are deleted.
   train.log_every = 100  # Progress-bar and log period in steps.
@@ -298,6 +302,7 @@ def validate(config, prefix="config"):
   validate_render(config, prefix)
 
   c.check_int(config, "train.num_steps", minimum=1, **kw)
+  c.check_int(config, "train.batch_size", minimum=1, **kw)
   c.check_int(config, "train.checkpoint_every", minimum=1, **kw)
   c.check_int(config, "train.keep_checkpoints", minimum=1, **kw)
   c.check_int(config, "train.log_every", minimum=1, **kw)

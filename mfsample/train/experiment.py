@@ -58,8 +58,9 @@ def train_and_evaluate(config, workdir):
                            settings=setup.step_config.settings, lpips_fn=lpips_fn,
                            uncertainty_z=z)
     eval_seconds = time.perf_counter() - t0
-    eval_lib.save_images(wd.file("images"), ev, dataset.test, num=config.eval.save_images)
-    if config.eval.export_ply:
+    if wd.writes:
+      eval_lib.save_images(wd.file("images"), ev, dataset.test, num=config.eval.save_images)
+    if config.eval.export_ply and wd.writes:
       export_ply.export_ply(wd.file("point_cloud.ply"), model)  # atomic
     summary = dict(ev.metrics)
     summary.update({

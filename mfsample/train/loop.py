@@ -1,7 +1,8 @@
 """The host loop: `run_steps` (every field) and `train` (reusable).
 
-The loop is thin: it picks the target of each step (a function of (seed, step)), calls the
-jitted step, grows the render budget when a step reports overflow (the step left the state
+The loop is thin: it picks the target of each step (a function of (seed, step); with a
+batch of B targets per step, the targets at positions tB .. tB + B - 1 of the same order),
+calls the jitted step, grows the render budget when a step reports overflow (the step left the state
 untouched, so it is simply re-run), and runs the host events of 3DGS (densification, opacity
 reset) between steps (`run_steps`, shared by the colour and the relightable field). `train`
 adds the log, the progress bar and checkpoints.
@@ -20,7 +21,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from mfsample import interrupts
+from mfsample import distributed, interrupts, sharding
 from mfsample import workdir as workdir_lib
 from mfsample._json import without_fields
 from mfsample.data import datasets as data_lib
@@ -50,7 +51,7 @@ class TrainSetup(NamedTuple):
   init_scales: dict  # {group: float} scale of fresh B_hat entries
   step_config: StepConfig  # static settings of the jitted step (budget included)
   num_steps: int  # steps of the whole run (the schedules span them)
-  sobol: np.ndarray  # [num_steps * M, k] z rows (empty unless lowrank + Sobol)
+  sobol: np.ndarray  # [num_steps * B * M, k] z rows (empty unless lowrank + Sobol)
   field: object = COLOUR  # the step's `Field` (static): colour, or relightable
 
 
@@ -128,6 +129,7 @@ def make_setup(config, train_views, *, extent=None, key=None):
   volume_weight = config.loss.volume_weight
   if volume_weight is None:
     volume_weight = 1.0 / len(train_views)
+  batch_size = int(config.train.batch_size)
   step_config = StepConfig(
       settings=render_settings(config.render),
       background=tuple(float(c) for c in config.data.background),
@@ -141,11 +143,14 @@ def make_setup(config, train_views, *, extent=None, key=None):
       stochastic_until=(2**31 - 1 if config.sampler.stochastic_until is None
                         else int(config.sampler.stochastic_until)),
       rates=rates,
+      batch_size=batch_size,
+      # B = 1 runs the single-target step on one device (in every process alike).
+      num_devices=1 if batch_size == 1 else sharding.default_num_devices(batch_size),
   )
   if config.sampler.z not in ("sobol", "uniform"):
     raise ValueError(f"config.sampler.z must be 'sobol' or 'uniform', got {config.sampler.z!r}")
-  sobol = sobol_rows(spec, num_steps * step_config.num_samples, config.sampler.z_seed,
-                     config.sampler.z)
+  sobol = sobol_rows(spec, num_steps * batch_size * step_config.num_samples,
+                     config.sampler.z_seed, config.sampler.z)
   return TrainSetup(seed=seed, extent=float(extent), spec=spec,
                     init_scales=init_scales(config.sampler, extent, GROUPS),
                     step_config=step_config, num_steps=num_steps, sobol=sobol)
@@ -167,6 +172,23 @@ def view_for_step(seed, step, num_views):
   return int(np.random.default_rng([int(seed), 1, epoch]).permutation(num_views)[within])
 
 
+def views_for_step(seed, step, num_views, batch_size):
+  """The step's index into the views: `view_for_step(step)` (int32) for one view per step;
+  with B > 1, the [B] views at positions step B .. step B + B - 1 of the same order."""
+  if batch_size == 1:
+    return jnp.int32(view_for_step(seed, step, num_views))
+  first = int(step) * batch_size
+  return jnp.asarray([view_for_step(seed, p, num_views)
+                      for p in range(first, first + batch_size)], jnp.int32)
+
+
+def step_sobol(setup: TrainSetup, step):
+  """The Sobol rows of `step`: [M, k], or [B, M, k] (each target's) with a batch."""
+  m, b = setup.step_config.num_samples, setup.step_config.batch_size
+  rows = setup.sobol[step * b * m:(step + 1) * b * m]
+  return rows if b == 1 else rows.reshape(b, m, rows.shape[-1])
+
+
 # ------------------------------------------------------------------------- training
 
 
@@ -180,7 +202,8 @@ def checkpoint_meta(state, setup: TrainSetup, **extra):
 def _meta(config, setup, state, history, train_seconds):
   return checkpoint_meta(
       state, setup, seed=setup.seed, sobol_seed=int(config.sampler.z_seed),
-      sobol_position=int(state.step) * setup.step_config.num_samples, extent=setup.extent,
+      sobol_position=int(state.step) * setup.step_config.batch_size
+      * setup.step_config.num_samples, extent=setup.extent,
       history=history, train_seconds=train_seconds, config=resumable_config(config))
 
 
@@ -290,6 +313,10 @@ def run_steps(config, setup: TrainSetup, state, data, *, pick, end, max_traces=N
   (`config.render.max_budget` at most) and the step runs again. After every completed step
   the host events of 3DGS run (`host_events`).
 
+  With a batch split over several devices (`StepConfig.num_devices` > 1) `data` is placed on
+  every one of them once, and the yielded states are replicated over them
+  (`sharding.host_local` brings one back to this process alone).
+
   Args:
     config: a config with `densify`, `model.max_gaussians` and `render.max_budget` (a
       training config, or the light-planning config).
@@ -297,7 +324,8 @@ def run_steps(config, setup: TrainSetup, state, data, *, pick, end, max_traces=N
     state: `TrainState`.
     data: the field's training data, device arrays (`ColourField`: (images, cameras)).
     pick: step -> the step's index into `data` (a function of the seed and the step, so
-      that a resumed run draws the same).
+      that a resumed run draws the same); with `StepConfig.batch_size` B > 1, the B
+      targets (a leading [B] axis on every leaf).
     end: stop when this many steps are done in total.
     max_traces: passed to `make_train_step` (tests: 1).
 
@@ -308,17 +336,21 @@ def run_steps(config, setup: TrainSetup, state, data, *, pick, end, max_traces=N
     mfsample.interrupts.Interrupted: a stop was requested (between two steps).
   """
   step_fn = make_train_step(setup.step_config, setup.field, max_traces)
-  m = setup.step_config.num_samples
+  # On the step's devices once (not copied there at every call), the state in the placement
+  # the step returns it in (an input placed otherwise would compile the step a second time).
+  place = lambda tree: sharding.replicated(tree, setup.step_config.num_devices)  # noqa: E731
+  data, state = place(data), place(state)
   step = int(state.step)
   while step < end:
     interrupts.check(f"at step {step}")  # a safe point: between two steps
-    new_state, metrics = step_fn(state, data, pick(step), setup.sobol[step * m:(step + 1) * m])
+    new_state, metrics = step_fn(state, data, pick(step), step_sobol(setup, step))
     if bool(metrics.overflow):  # nothing was updated: grow the budget and redo the step
       setup = with_grown_budget(setup, metrics, int(config.render.max_budget), step)
       step_fn = make_train_step(setup.step_config, setup.field, max_traces)
       continue
     state, step = new_state, step + 1
     state, report = host_events(config, setup, state, step)
+    state = place(state)  # (densification builds new arrays on the host)
     yield StepDone(state, setup, metrics, report)
 
 
@@ -373,10 +405,12 @@ def train(config, views, key=None, *, setup=None, state=None, bounds=None,
   step = int(state.step)
   end = setup.num_steps if stop_at is None else min(stop_at, setup.num_steps)
   num_views = len(views) if num_views is None else int(num_views)
-  bar = tqdm(total=setup.num_steps, initial=step, disable=not config.train.progress,
+  bar = tqdm(total=setup.num_steps, initial=step,
+             disable=not (config.train.progress and distributed.is_writer()),
              desc=f"train {setup.spec.kind}", dynamic_ncols=True)
   t0 = time.perf_counter()
-  pick = lambda s: jnp.int32(view_for_step(setup.seed, s, num_views))  # noqa: E731
+  batch = setup.step_config.batch_size
+  pick = lambda s: views_for_step(setup.seed, s, num_views, batch)  # noqa: E731
   steps = run_steps(config, setup, state, (views.images, views.cameras), pick=pick, end=end,
                     max_traces=max_traces)
   saved = step
@@ -411,4 +445,6 @@ def train(config, views, key=None, *, setup=None, state=None, bounds=None,
       saved = step
   bar.close()
   seconds = time.perf_counter() - t0
+  if setup.step_config.num_devices > 1:
+    state = sharding.host_local(state)  # free to be used on any mesh from here on
   return TrainResult(state, setup, history, seconds, seconds_before + seconds)

@@ -11,6 +11,28 @@ What differs between kinds of field is a small static interface, `Field`: which 
 camera (and light) a step trains on, how a sample of the model is rendered there, and the
 per-step schedule of the model (3DGS's rising SH degree). `ColourField` is the 3DGS colour
 field (SH colour per Gaussian); the relightable field of `mfsample.lighting` is the other.
+
+Data-parallel training: with `StepConfig.batch_size` B > 1 a step trains on a batch of B
+targets (views, or (light, view) pairs), split over `StepConfig.num_devices` devices
+(`mfsample.sharding.reduce_sharded`), each with its own z. Precisely, the B targets at the
+positions p = tB .. tB + B - 1 of the target order (a B = 1 run's steps tB .. tB + B - 1,
+each with that step's z: Sobol rows p M .. p M + M - 1, or the key fold_in(key, p)) are all
+evaluated at the step's parameters, and
+
+  loss = (1/B) sum_b D_b - lambda_t ||B_hat||_1,   D_b = (1/M) sum_m L1-D-SSIM(theta(z_bm), b),
+
+the mean over the batch of each target's Eq. 9 data term (itself the mean over its M
+samples), less the volume term of the step. Its gradient (the mean of the per-target
+gradients, plus the volume term's) drives one Adam step. The densification statistics are
+accumulated as if the B targets had been B consecutive steps at the same parameters: each
+target adds its own NDC gradient norm ||dD_b / d(2D centre)|| (of its own data term, not of
+the batch mean, so 3DGS's threshold keeps its meaning) and one visibility count for every
+Gaussian it sees, and the largest screen radius is the largest over the targets. Counts and
+radii are exact; the gradient norms are summed in another order than B consecutive steps
+would (float rounding). A step overflows if any target's render does. Schedules (learning
+rates, densification, the volume term, `stochastic_until`, the SH degree) count steps, so a
+run of `num_steps` steps sees B times as many targets as with B = 1. B = 1 is the plain
+single-target step, bit for bit.
 """
 
 import dataclasses
@@ -22,7 +44,7 @@ import jax
 import jax.numpy as jnp
 import optax
 
-from mfsample import samplers
+from mfsample import samplers, sharding
 from mfsample.model import Model, project_spread
 from mfsample.renderer.render import render
 from mfsample.renderer.settings import RenderSettings
@@ -101,6 +123,9 @@ class StepConfig:
     train_mean: False freezes the mean: its gradient is stopped, so Adam's moments of it stay
       zero and its update is exactly zero; only B_hat is fitted (post-hoc uncertainty of a
       pretrained model, `mfsample.train.posthoc`).
+    batch_size: B, targets per step (module docstring); 1: the single-target step.
+    num_devices: devices the B targets are split over (B > 1 only; the devices of every
+      process, `mfsample.sharding.mesh_devices`).
   """
 
   settings: RenderSettings = RenderSettings()
@@ -115,6 +140,8 @@ class StepConfig:
   stochastic_until: int = 2**31 - 1
   rates: optim.LearningRates = optim.LearningRates()
   train_mean: bool = True
+  batch_size: int = 1
+  num_devices: int = 1
 
   @property
   def optimizer(self):
@@ -170,18 +197,80 @@ def _mask_rows(tree, mask):
   return jax.tree.map(f, tree)
 
 
+def step_z(cfg, model, key, position, step, sobol_rows):
+  """z [M, k] of the target at `position` of the target order, in step `step`.
+
+  The target's Sobol rows (or fresh uniforms from `fold_in(key, position)`, per
+  `samplers.draw_z`), zero from `stochastic_until` on (the mean is rendered). With one
+  target per step, position = step.
+  """
+  z = samplers.draw_z(model, cfg.num_samples, jax.random.fold_in(key, position), sobol_rows)
+  return jnp.where(step < cfg.stochastic_until, z, 0.0)
+
+
+def volume_weight_at(cfg, step):
+  """The weight of Eq. 9's volume term in `step`: lambda on every `volume_every`-th step
+  before `volume_until`, else 0."""
+  volume_on = ((step + 1) % cfg.volume_every == 0) & (step < cfg.volume_until)
+  return jnp.where(volume_on, cfg.volume_weight, 0.0)
+
 
 def step_schedule(cfg, model, key, step, sobol_rows):
-  """This step's samples z [M, k] and the weight of Eq. 9's volume term.
+  """This step's samples z [M, k] (`step_z`) and the weight of Eq. 9's volume term
+  (`volume_weight_at`), for one target per step."""
+  return step_z(cfg, model, key, step, step, sobol_rows), volume_weight_at(cfg, step)
 
-  z are the step's Sobol rows (or fresh uniforms from `fold_in(key, step)`, per
-  `samplers.draw_z`), zero from `stochastic_until` on (the mean is rendered); the volume
-  term -lambda ||B_hat||_1 counts every `volume_every`-th step before `volume_until`.
-  """
-  z = samplers.draw_z(model, cfg.num_samples, jax.random.fold_in(key, step), sobol_rows)
-  z = jnp.where(step < cfg.stochastic_until, z, 0.0)
-  volume_on = ((step + 1) % cfg.volume_every == 0) & (step < cfg.volume_until)
-  return z, jnp.where(volume_on, cfg.volume_weight, 0.0)
+
+def _trainable(params, cfg):
+  """`params` with the mean's gradient stopped unless `cfg.train_mean`."""
+  if not cfg.train_mean:
+    params = params._replace(mean=jax.lax.stop_gradient(params.mean))
+  return params
+
+
+def _volume(m, dtype):
+  """||B_hat||_1 of a stochastic model; 0 for a deterministic one."""
+  return losses.volume(m) if m.spec.stochastic else jnp.zeros((), dtype)
+
+
+def _data_term(field, m, z, image, camera, extra, cfg, offset2d):
+  """(D, aux): Eq. 9's data term of one target, the mean over its M samples z [M, k] of the
+  photometric loss, and the samples' (radii [M, C], visible [M, C], `TileStats` [M])."""
+  def one(z_i):
+    out = field.render(m, z_i, camera, extra, cfg, offset2d)
+    return losses.photometric(out.rgb, image, cfg.ssim_weight), (out.radii, out.visible,
+                                                                  out.stats)
+
+  if cfg.num_samples == 1:
+    # A plain call keeps the renderer's cheap skipping of unused budget (vmap would not).
+    data_loss, aux = jax.tree.map(lambda x: x[None], one(z[0]))
+  else:
+    data_loss, aux = jax.lax.map(one, z)  # sequential: same reason, and bounded memory
+  return jnp.mean(data_loss), aux
+
+
+def _ndc_grad_norm(grad2d, camera):
+  """[C] ||dL/d(2D centre)|| in NDC units (3DGS): pixel gradient times half the image size."""
+  half_size = jnp.array([0.5 * camera.width, 0.5 * camera.height], grad2d.dtype)
+  return jnp.linalg.norm(grad2d * half_size, axis=-1)
+
+
+def _finish(state, model, grads, new_stats, overflow, cfg):
+  """The new state after Adam on `grads` (padding rows frozen, B_hat clamped), or the old one
+  on overflow."""
+  updates, opt_state = cfg.optimizer.update(grads, state.opt_state, model.params)
+  updates = _mask_rows(updates, model.mask)  # padding rows never move
+  params = optax.apply_updates(model.params, updates)
+  params = params._replace(spread=project_spread(params.spread, model.spec))
+  new_model = model.replace(params=params)
+  new_state = TrainState(state.step + 1, new_model, opt_state, new_stats, state.key)
+
+  # On overflow the step is void: keep the old state. A select fuses into the elementwise
+  # updates (a lax.cond would copy the whole state); the shape check, at trace time, keeps
+  # it from silently broadcasting a malformed state.
+  chex.assert_trees_all_equal_shapes_and_dtypes(state, new_state)
+  return jax.tree.map(lambda old, new: jnp.where(overflow, old, new), state, new_state)
+
 
 def train_step(state: TrainState, data, index, sobol_rows, *, cfg: StepConfig,
                field=COLOUR):
@@ -190,14 +279,19 @@ def train_step(state: TrainState, data, index, sobol_rows, *, cfg: StepConfig,
   Args:
     state: `TrainState`.
     data: the field's training data (`ColourField`: images [V, H, W, 3] and `Camera` [V]).
-    index: the step's target in `data` (`ColourField`: the view, int32).
-    sobol_rows: [M, k] Sobol z's of this step (low-rank sampler; ignored otherwise).
+    index: the step's target in `data` (`ColourField`: the view, int32); with
+      `cfg.batch_size` B > 1 the B targets, a leading [B] axis on every leaf.
+    sobol_rows: [M, k] Sobol z's of this step (low-rank sampler; ignored otherwise); with
+      B > 1, [B, M, k]: each target's rows.
     cfg: `StepConfig` (static).
     field: the `Field` (static): what a step trains on and how a sample is rendered.
 
   Returns:
-    (new state, `StepMetrics`).
+    (new state, `StepMetrics`). With B > 1, `loss` and `data_loss` are the batch's (module
+    docstring) and `num_padded` the largest over its targets.
   """
+  if cfg.batch_size > 1:
+    return _batch_step(state, data, index, sobol_rows, cfg, field)
   step = state.step
   model = field.prepare(state.model, step, cfg)
   image, camera, extra = field.target(data, index)
@@ -205,37 +299,17 @@ def train_step(state: TrainState, data, index, sobol_rows, *, cfg: StepConfig,
   offset2d = jnp.zeros((model.capacity, 2), model.params.mean["means"].dtype)
 
   def loss_fn(params, offset2d):
-    if not cfg.train_mean:
-      params = params._replace(mean=jax.lax.stop_gradient(params.mean))
-    m = model.replace(params=params)
-
-    def one(z_i):
-      out = field.render(m, z_i, camera, extra, cfg, offset2d)
-      return losses.photometric(out.rgb, image, cfg.ssim_weight), (out.radii, out.visible,
-                                                                    out.stats)
-
-    if cfg.num_samples == 1:
-      # A plain call keeps the renderer's cheap skipping of unused budget (vmap would not).
-      data_loss, aux = jax.tree.map(lambda x: x[None], one(z[0]))
-    else:
-      data_loss, aux = jax.lax.map(one, z)  # sequential: same reason, and bounded memory
-    data_loss = jnp.mean(data_loss)
-    volume = losses.volume(m) if m.spec.stochastic else jnp.zeros((), data_loss.dtype)
+    m = model.replace(params=_trainable(params, cfg))
+    data_loss, aux = _data_term(field, m, z, image, camera, extra, cfg, offset2d)
+    volume = _volume(m, data_loss.dtype)
     return data_loss - volume_weight * volume, (data_loss, volume, aux)
 
   grad_fn = jax.value_and_grad(loss_fn, argnums=(0, 1), has_aux=True)
   (loss, (data_loss, volume, (radii, visible, stats))), (grads, grad2d) = grad_fn(
       model.params, offset2d)
 
-  updates, opt_state = cfg.optimizer.update(grads, state.opt_state, model.params)
-  updates = _mask_rows(updates, model.mask)  # padding rows never move
-  params = optax.apply_updates(model.params, updates)
-  params = params._replace(spread=project_spread(params.spread, model.spec))
-  new_model = model.replace(params=params)
-
   # Densification statistics (3DGS): the norm of the 2D-centre gradient in NDC units.
-  half_size = jnp.array([0.5 * camera.width, 0.5 * camera.height], grad2d.dtype)
-  grad_norm = jnp.linalg.norm(grad2d * half_size, axis=-1)
+  grad_norm = _ndc_grad_norm(grad2d, camera)
   seen = jnp.any(visible, axis=0) & (step < cfg.stats_until)
   new_stats = DensifyStats(
       grad_accum=state.stats.grad_accum + jnp.where(seen, grad_norm, 0.0),
@@ -243,16 +317,100 @@ def train_step(state: TrainState, data, index, sobol_rows, *, cfg: StepConfig,
       max_radii=jnp.where(seen, jnp.maximum(state.stats.max_radii, jnp.max(radii, axis=0)),
                           state.stats.max_radii),
   )
-  new_state = TrainState(step + 1, new_model, opt_state, new_stats, state.key)
-
-  # On overflow the step is void: keep the old state. A select fuses into the elementwise
-  # updates (a lax.cond would copy the whole state); the shape check, at trace time, keeps
-  # it from silently broadcasting a malformed state.
-  chex.assert_trees_all_equal_shapes_and_dtypes(state, new_state)
   overflow = jnp.any(stats.overflow)
-  new_state = jax.tree.map(lambda old, new: jnp.where(overflow, old, new), state, new_state)
+  new_state = _finish(state, model, grads, new_stats, overflow, cfg)
   metrics = StepMetrics(loss=loss, data_loss=data_loss, volume=volume, overflow=overflow,
                         num_padded=jnp.max(stats.num_padded))
+  return new_state, metrics
+
+
+def _target_terms(target, model, data, step, cfg, field):
+  """One target's share of a batch step: (sums, maxes) for `sharding.reduce_sharded`.
+
+  sums: (D, dD/dparams, [C] NDC gradient norm where seen, [C] int32 seen);
+  maxes: ([C] largest screen radius where seen (0 elsewhere), int32 overflow, int32 padded
+  intersections).
+  """
+  index, z = target
+  image, camera, extra = field.target(data, index)
+  offset2d = jnp.zeros((model.capacity, 2), model.params.mean["means"].dtype)
+
+  def data_fn(params, offset2d):
+    m = model.replace(params=_trainable(params, cfg))
+    return _data_term(field, m, z, image, camera, extra, cfg, offset2d)
+
+  grad_fn = jax.value_and_grad(data_fn, argnums=(0, 1), has_aux=True)
+  (data_loss, (radii, visible, stats)), (grads, grad2d) = grad_fn(model.params, offset2d)
+  seen = jnp.any(visible, axis=0) & (step < cfg.stats_until)
+  sums = (data_loss, grads, jnp.where(seen, _ndc_grad_norm(grad2d, camera), 0.0),
+          seen.astype(jnp.int32))
+  maxes = (jnp.where(seen, jnp.max(radii, axis=0), 0), jnp.any(stats.overflow).astype(jnp.int32),
+           jnp.max(stats.num_padded))
+  return sums, maxes
+
+
+class BatchGradients(NamedTuple):
+  """What a batch of B targets gives at the step's parameters (module docstring).
+
+  Attributes:
+    loss: (1/B) sum_b D_b - lambda_t ||B_hat||_1.
+    data_loss: (1/B) sum_b D_b.
+    volume: ||B_hat||_1 over live Gaussians (0 for a deterministic model).
+    grads: d loss / d params (the mean of the per-target gradients plus the volume term's).
+    stats: `DensifyStats` of the batch alone: grad_accum [C] the sum over the targets of
+      ||dD_b / d(2D centre)|| (NDC) where seen, count [C] the targets that see each
+      Gaussian, max_radii [C] the largest radius over them (0 where none sees it).
+    overflow: bool, a target's render overflowed.
+    num_padded: int32, the largest padded intersection count over the targets.
+  """
+
+  loss: chex.Array
+  data_loss: chex.Array
+  volume: chex.Array
+  grads: object
+  stats: DensifyStats
+  overflow: chex.Array
+  num_padded: chex.Array
+
+
+def batch_gradients(state: TrainState, data, index, sobol_rows, *, cfg: StepConfig,
+                    field=COLOUR) -> BatchGradients:
+  """`BatchGradients` of the B = `cfg.batch_size` targets `index` (leaves [B]) with Sobol
+  rows [B, M, k], split over `cfg.num_devices` devices; inside jit."""
+  step = state.step
+  model = field.prepare(state.model, step, cfg)
+  b = jax.tree.leaves(index)[0].shape[0]
+  positions = step * b + jnp.arange(b)
+  z = jax.vmap(lambda p, rows: step_z(cfg, model, state.key, p, step, rows))(
+      positions, jnp.asarray(sobol_rows))
+  (data_sum, grad_sum, grad_norms, counts), (radii, overflow, num_padded) = (
+      sharding.reduce_sharded(
+          lambda target, mdl, dat: _target_terms(target, mdl, dat, step, cfg, field),
+          (index, z), model, data, num_devices=cfg.num_devices))
+  data_loss = data_sum / b
+  volume_weight = volume_weight_at(cfg, step)
+
+  def volume_fn(params):
+    volume = _volume(model.replace(params=_trainable(params, cfg)), data_loss.dtype)
+    return -volume_weight * volume, volume
+
+  (_, volume), volume_grads = jax.value_and_grad(volume_fn, has_aux=True)(model.params)
+  grads = jax.tree.map(lambda g, v: g / b + v, grad_sum, volume_grads)
+  stats = DensifyStats(grad_norms, counts, radii.astype(state.stats.max_radii.dtype))
+  return BatchGradients(data_loss - volume_weight * volume, data_loss, volume, grads, stats,
+                        overflow > 0, num_padded)
+
+
+def _batch_step(state, data, index, sobol_rows, cfg, field):
+  """`train_step` with B = `cfg.batch_size` > 1 targets (module docstring)."""
+  model = field.prepare(state.model, state.step, cfg)
+  g = batch_gradients(state, data, index, sobol_rows, cfg=cfg, field=field)
+  new_stats = DensifyStats(grad_accum=state.stats.grad_accum + g.stats.grad_accum,
+                           count=state.stats.count + g.stats.count,
+                           max_radii=jnp.maximum(state.stats.max_radii, g.stats.max_radii))
+  new_state = _finish(state, model, g.grads, new_stats, g.overflow, cfg)
+  metrics = StepMetrics(loss=g.loss, data_loss=g.data_loss, volume=g.volume,
+                        overflow=g.overflow, num_padded=g.num_padded)
   return new_state, metrics
 
 
