@@ -13,12 +13,45 @@ if "xla_backend_optimization_level" not in os.environ.get("XLA_FLAGS", ""):
                              + " --xla_backend_optimization_level=0").strip()
 
 
+import pytest  # noqa: E402
+
+# ------------------------------------------------------------------------- memory maps
+# A test worker compiles thousands of distinct programs, and every XLA CPU executable holds
+# memory maps of its own. Linux caps a process's maps (vm.max_map_count, 65530 by default);
+# at the cap a compilation fails inside XLA and the compiling thread waits for it forever
+# (the suite hangs near its end, with the worker idle in `backend_compile_and_load`). So
+# the compiled functions are dropped once a worker holds half the cap: the next tests
+# compile again, which costs seconds, not a hang.
+
+
+def _map_count():
+  """(maps this process holds, the system's cap), or None where /proc does not say."""
+  try:
+    with open("/proc/self/maps", "rb") as f:
+      held = sum(1 for _ in f)
+    with open("/proc/sys/vm/max_map_count") as f:
+      return held, int(f.read())
+  except (OSError, ValueError):
+    return None
+
+
+@pytest.fixture(autouse=True)
+def _bounded_memory_maps():
+  yield
+  counts = _map_count()
+  if counts is not None and counts[0] > counts[1] // 2:
+    import gc
+
+    import jax
+
+    jax.clear_caches()
+    gc.collect()
+
+
 # ------------------------------------------------------------------------- training fixtures
 # A tiny synthetic scene rendered once per session. Compiled functions are shared through the
 # library's module-level jits (`render`, `train_step_jit`, which take their settings as
 # static arguments): tests that build equal configs reuse one compilation.
-
-import pytest  # noqa: E402
 
 from configs import train as train_configs  # noqa: E402
 from mfsample.data import datasets as data_lib  # noqa: E402

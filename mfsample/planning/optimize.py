@@ -70,7 +70,8 @@ class OptimizeSettings:
     arg_checks.check_int("OptimizeSettings.z_drop_step", self.z_drop_step, minimum=0)
     arg_checks.check_float("OptimizeSettings.z_drop_scale", self.z_drop_scale, minimum=0.0)
     for name in ("lr", "se3_lr_rotation", "se3_lr_translation"):
-      arg_checks.check_float(f"OptimizeSettings.{name}", getattr(self, name), above=0.0)
+      # 0 is allowed: the pose stays where selection put it (the optimiser's ablation).
+      arg_checks.check_float(f"OptimizeSettings.{name}", getattr(self, name), minimum=0.0)
     if not isinstance(self.resample_z, bool):
       raise ValueError(f"OptimizeSettings.resample_z must be True or False, got "
                        f"{self.resample_z!r}")

@@ -7,7 +7,8 @@ training checkpoint (a `TrainState`, leaves under `.model.`), a light-planning c
 capacity and rank are read from the arrays, so the viewer needs no training config.
 
 The sampler's B_hat bounds are not stored (they only clamp B_hat during training and play no
-part in sampling theta(z) = mean + B_hat z): the spec read here carries infinite bounds.
+part in sampling theta(z) = mean + B_hat z): the spec read here carries the largest float32
+as every bound, which clamps nothing (SamplerSpec refuses an infinite bound).
 """
 
 import functools
@@ -26,6 +27,7 @@ from mfsample.renderer.settings import RenderSettings
 from mfsample.train import checkpoint as ckpt
 
 # Leaf names of a saved Model, alone or inside a TrainState (`jax.tree_util.keystr` paths).
+_NO_CLAMP = float(np.finfo(np.float32).max)
 _LEAF = re.compile(r"^(?:\.model)?\.(?:params\.(mean|spread)|(signs))\['(\w+)'\]$")
 _FLAT = re.compile(r"^(?:\.model)?\.(mask|sh_degree)$")
 
@@ -66,7 +68,7 @@ def read_model(path, sampler_kind="lowrank") -> Model:
     any_group = next(iter(spread))
     rank = int(spread[any_group].shape[-1])
   spec = SamplerSpec(kind=kind, rank=rank, groups=tuple(spread),
-                     bounds=tuple((g, float("inf")) for g in spread))
+                     bounds=tuple((g, _NO_CLAMP) for g in spread))
   return Model(params=Params(mean=groups["mean"], spread=spread), signs=groups["signs"],
                mask=flat["mask"].astype(bool), sh_degree=np.asarray(flat.get("sh_degree", 0)),
                spec=spec)
