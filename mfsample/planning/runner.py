@@ -443,10 +443,11 @@ def run_camera_planning(config, workdir):
         records.append(record)
         bar.update(rounds + len(eval_views))
         continue
-      strategy = rounds_lib.record_rounds(
-          strategies.make_strategy(name, config), wd.file(rounds_lib.DIRECTORY),
-          run_name(name, seed), seed, keep_models=seed == int(config.seeds[0]),
-          keep=int(config.max_views))
+      strategy = strategies.make_strategy(name, config)
+      if wd.writes:  # the rounds the viewer shows, recorded by the writing process only
+        strategy = rounds_lib.record_rounds(
+            strategy, wd.file(rounds_lib.DIRECTORY), run_name(name, seed), seed,
+            keep_models=seed == int(config.seeds[0]), keep=int(config.max_views))
       bar.set_postfix_str(f"{strategy.label}, seed {seed}")
       t_run = time.perf_counter()
       selected, budgets = plan_views(strategy, pool, config, seed, trainer, budgets,
@@ -461,7 +462,8 @@ def run_camera_planning(config, workdir):
         bar.update(1)
       record = run_record(strategy, seed, selected, metrics, time.perf_counter() - t_run,
                           pool)
-      export_views(wd.file("views", run_name(name, seed)), selected)
+      if wd.writes:
+        export_views(wd.file("views", run_name(name, seed)), selected)
       wd.write_json(entry, record)  # after its views: marks the run done
       records.append(record)
     bar.close()
