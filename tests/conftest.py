@@ -4,13 +4,28 @@ The suite is dominated by XLA compilation of many small, distinct programs, not 
 them. LLVM's backend optimisation level 0 cuts that CPU time by about a third (measured on
 tests/test_render.py) without changing results: floating-point semantics are set by XLA's
 own flags, not by the LLVM pass pipeline. A user-provided XLA_FLAGS is respected.
+
+The test workers and the subprocesses tests start compile many of the same programs (the
+tiny scene's training step, its renders): JAX's persistent compilation cache, in a folder
+of this test run only (removed at its end), lets the second compilation be a read. A
+user-provided JAX_COMPILATION_CACHE_DIR is respected.
 """
 
+import atexit
 import os
+import shutil
+import tempfile
 
 if "xla_backend_optimization_level" not in os.environ.get("XLA_FLAGS", ""):
   os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "")
                              + " --xla_backend_optimization_level=0").strip()
+
+# One folder per test run, made by the first process that loads this file (pytest's
+# controller, or the only process); the workers and the subprocesses of tests inherit it.
+if "JAX_COMPILATION_CACHE_DIR" not in os.environ:
+  os.environ["JAX_COMPILATION_CACHE_DIR"] = tempfile.mkdtemp(prefix="mfsample-tests-xla-cache-")
+  os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0.2")
+  atexit.register(shutil.rmtree, os.environ["JAX_COMPILATION_CACHE_DIR"], ignore_errors=True)
 
 
 import pytest  # noqa: E402
