@@ -26,7 +26,7 @@ renderer's share of it: `benchmarks/train_step.py --render_share`.
   python benchmarks/render.py --cells=50000x400 --chunks_per_step=16,64,256,1024
   python benchmarks/render.py --cells=50000x400 --searchsorted=scan,sort,compare_all
   python benchmarks/render.py --cells=garden \
-      --garden=../shared/data/real/garden_points/test_garden.npz --repeats=3
+      --garden=PATH/test_garden.npz --repeats=3
 
 On a CPU the pallas compositor runs in the Pallas interpreter: its times there are marked
 "interpreted" and measure nothing about a GPU.
