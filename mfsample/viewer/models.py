@@ -19,6 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from mfsample import uncertainty as unc
+from mfsample.mean_render import render_mean
 from mfsample.model import Model, Params, SamplerSpec, mean_gaussians
 from mfsample.renderer import sh as sh_lib
 from mfsample.renderer.budget import render_with_budget
@@ -139,12 +140,6 @@ def activate_geometry(model):
 
 
 @functools.partial(jax.jit, static_argnames=("settings",))
-def _mean_render(model, camera, background, *, settings):
-  from mfsample.renderer import render
-  return render(mean_gaussians(model), camera, background=background, settings=settings)
-
-
-@functools.partial(jax.jit, static_argnames=("settings",))
 def _relit_mean_render(model, camera, xi, *, settings):
   from mfsample.lighting import field
   return field.render_relit(model.params.mean, model.mask, xi, camera, settings=settings)
@@ -167,7 +162,7 @@ class Renderer:
   def colour(self, model, camera, z, background):
     """(mean render [H, W, 3], U map [H, W], U) of a colour model."""
     bg = jnp.asarray(background, jnp.float32)
-    rgb = self._fit(_mean_render, model, camera, bg).rgb
+    rgb = self._fit(render_mean, model, camera, bg).rgb
     if z.shape[0] < 2 or not model.spec.stochastic:
       return np.clip(np.asarray(rgb), 0, 1), np.zeros(rgb.shape[:2], np.float32), 0.0
     u = self._fit(unc.uncertainty, model, camera, z, background=bg)
