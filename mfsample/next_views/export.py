@@ -54,7 +54,7 @@ def preview(model, cameras, z, *, settings, background):
 
 
 def export_next_views(directory, model, cameras, z, *, settings, background, names=None,
-                      images=None, applied_transform=None, steps_per_view=1):
+                      images=None, applied_transform=None, steps_per_view=1, previews=None):
   """Writes the cameras, their mean renders and U maps (module docstring) to `directory`.
 
   Args:
@@ -68,12 +68,17 @@ def export_next_views(directory, model, cameras, z, *, settings, background, nam
     images: optional [V, H, W, 3] photographs of the cameras (candidates that have one).
     applied_transform: optional [3, 4] of the capture, recorded in transforms.json.
     steps_per_view: frames per transition of camera_path.json.
+    previews: optional (renders, maps, u) that `preview` already returned for these
+      cameras, model and z (then nothing is rendered here).
 
   Returns:
     ({format or folder: path}, the settings that sufficed).
   """
-  renders, maps, u, settings = preview(model, cameras, z, settings=settings,
-                                       background=background)
+  if previews is None:
+    renders, maps, u, settings = preview(model, cameras, z, settings=settings,
+                                         background=background)
+  else:
+    renders, maps, u = previews
   vmax = max(float(maps.max()), 1e-12)
   extra = {"uncertainty": colour_mapped(maps, vmax)}
   if images is not None:

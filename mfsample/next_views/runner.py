@@ -33,9 +33,8 @@ import numpy as np
 from mfsample import interrupts, jobs
 from mfsample import uncertainty as unc
 from mfsample.data import datasets, resolve_path
-from mfsample.mean_render import render_mean
 from mfsample.next_views.config import validate
-from mfsample.renderer.budget import Budgets, render_with_budget
+from mfsample.renderer.budget import Budgets
 from mfsample.train.config import speed_only_fields
 
 
@@ -197,6 +196,7 @@ def _propose(config, model, dataset, train_idx, unused_idx, center, z, budgets, 
   against it (`mfsample.planning.u_error`: U at the scoring size, the squared error at full
   size; rho with the angle to the nearest training view beside it)."""
   from mfsample.next_views.candidates import top_k
+  from mfsample.next_views.export import preview
   from mfsample.planning.u_error import u_against_error
 
   nv = config.next_views
@@ -211,16 +211,10 @@ def _propose(config, model, dataset, train_idx, unused_idx, center, z, budgets, 
   bar.close()
   budgets = ranking.budgets
   top = top_k(ranking.u, int(nv.k))
-  bg = jnp.asarray(dataset.background, jnp.float32)
-  renders, maps = [], []
-  for i in top:  # the proposals' mean renders and U maps at full size
-    camera = cameras[int(i)]
-    out, settings = render_with_budget(render_mean, budgets.eval, model, camera, bg)
-    u, settings = render_with_budget(unc.uncertainty, settings, model, camera, z,
-                                     background=bg)
-    budgets = budgets.replace(eval=settings)
-    renders.append(np.asarray(jnp.clip(out.rgb, 0.0, 1.0)))
-    maps.append(np.asarray(u.pixel_map))
+  # The proposals' mean renders and U maps at full size (written again by _viewer_files).
+  renders, maps, u_maps, settings = preview(model, cameras[top], z, settings=budgets.eval,
+                                            background=dataset.background)
+  budgets = budgets.replace(eval=settings)
   w2c = np.asarray(cameras.world_to_camera, np.float64)
   record = {"candidates": nv.candidates, "samples": int(z.shape[0]),
             "score_downscale": int(nv.score_downscale), "rho_u_error": ranking.rho_u_error,
@@ -235,7 +229,7 @@ def _propose(config, model, dataset, train_idx, unused_idx, center, z, budgets, 
             } for rank, i in enumerate(top)]}
   return {"record": record, "u": ranking.u, "top": top, "cameras": cameras,
           "images": None if images is None else images[top],
-          "renders": np.stack(renders), "maps": np.stack(maps)}
+          "renders": renders, "maps": maps, "map_sums": u_maps}
 
 
 def _viewer_files(config, model, dataset, proposal, z, budgets, wd):
@@ -263,7 +257,8 @@ def _viewer_files(config, model, dataset, proposal, z, budgets, wd):
   _, settings = export_next_views(
       wd.file("next_views"), model, proposal["cameras"][top], z, settings=budgets.eval,
       background=background, names=names, images=proposal["images"],
-      applied_transform=applied)
+      applied_transform=applied,
+      previews=(proposal["renders"], proposal["maps"], proposal["map_sums"]))
   per_gaussian = gaussian_uncertainty(model, proposal["cameras"], z, settings=settings,
                                       background=background)
   plys = write_uncertainty_plys(wd.file("uncertainty_ply"), model, per_gaussian)
