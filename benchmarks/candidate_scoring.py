@@ -48,15 +48,16 @@ def random_model(num_gaussians, seed=0):
   import jax
   import numpy as np
 
-  from mfsample.model import GROUPS, SamplerSpec, init_model
+  from mfsample.groups import GROUPS
+  from mfsample.model import init_model
+  from mfsample.samplers import SamplerSpec
 
   rng = np.random.default_rng(seed)
   points = rng.normal(size=(num_gaussians, 3))
   points *= (rng.uniform(size=(num_gaussians, 1)) ** (1 / 3)) / np.linalg.norm(
       points, axis=1, keepdims=True)
-  bounds = tuple(zip(GROUPS, (1.0, 20.0, 2.0, 20.0, 0.5, 0.5), strict=True))
   return init_model(jax.random.PRNGKey(seed), points,
-                    spec=SamplerSpec("lowrank", 2, GROUPS, bounds), sh_degree=0,
+                    spec=SamplerSpec.default(GROUPS, kind="lowrank", rank=2), sh_degree=0,
                     init_scales={g: 0.01 for g in GROUPS}, init_opacity=0.5,
                     colors=rng.uniform(size=(num_gaussians, 3)))
 
@@ -81,11 +82,11 @@ def run(*, num_gaussians, resolution, num_candidates, samples, probes, repeats):
   import jax.numpy as jnp
   import numpy as np
 
-  from mfsample import uncertainty as unc
+  from mfsample import view_uncertainty as unc
   from mfsample.baselines import fisher
-  from mfsample.model import SamplerSpec
   from mfsample.planning import poses
   from mfsample.renderer import RenderSettings
+  from mfsample.samplers import SamplerSpec, sample_z
   from mfsample.sharding import map_cameras
 
   rng = np.random.default_rng(0)
@@ -94,13 +95,13 @@ def run(*, num_gaussians, resolution, num_candidates, samples, probes, repeats):
   uv = poses.random_uv(rng, num_candidates, sphere).astype(np.float32)
   cams = poses.spherical_camera(jnp.asarray(uv), sphere)
   bg = jnp.ones(3)
-  z = unc.uncertainty_z(model, samples, 6174)
+  z = sample_z(model, samples, seed=6174)
   # The smallest power-of-two budget that holds every candidate (a forward render's cost
   # grows with the budget: the tile sort spans all of it).
   _, settings = unc.score_cameras(model, cams, z,
                                   settings=RenderSettings(max_intersections=512), background=bg)
   det = model.replace(spec=SamplerSpec("deterministic"), params=model.params._replace(
-      spread={}), signs={})
+      b_hat={}), signs={})
 
   def ours():
     return unc.score_cameras(model, cams, z, settings=settings, background=bg)[0].values

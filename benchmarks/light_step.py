@@ -5,11 +5,11 @@ image size, and run the jitted steps of their own trainers: the colour step of
 `mfsample.train` (SH colour of degree `--sh_degree`, B_hat over every group, as the training
 config) and the relightable step of `mfsample.lighting.training` (T of m x n x 3, B_hat over
 T, as the light-planning config). Their data are the synthetic diffuse shell's captures
-(`mfsample.lighting.captures`): under the uniform light for the colour model, under a few
-lights for the relightable one. The two steps run in turn, one of each at a time, and the
-ratio of their median times is taken per round, so both see the same load. Wall-clock and
-the process's CPU time are both recorded: on a machine shared with other work the CPU time
-is the steadier of the two.
+(`mfsample.data.datasets.load_light_data`): under the uniform light for the colour model,
+under a few lights for the relightable one. The two steps run in turn, one of each at a
+time, and the ratio of their median times is taken per round, so both see the same load.
+Wall-clock and the process's CPU time are both recorded: on a machine shared with other
+work the CPU time is the steadier of the two.
 
 Then U(xi) (M = 2 samples, summed over the training cameras at 1 / `--u_downscale` of the
 image size, as the protocol plans), its gradient w.r.t. xi, and the quadratic form Q are
@@ -54,18 +54,21 @@ def _light_config():
   return config
 
 
-def _colour_config(light_config):
-  from mfsample.train.config import get_config
+def _colour_recipe(light, extent):
+  """The colour field's `Recipe`: the training job's rank-2 field of SH degree `--sh_degree`
+  (B_hat over every group) from `--points` random points, every SH band from the first step,
+  densification off, the relightable `light` recipe's render settings, on black."""
+  from mfsample.groups import GROUPS
+  from mfsample.samplers import SamplerSpec
+  from mfsample.train import DensifySettings, InitSettings, TrainSettings
+  from mfsample.train.initial import Recipe
 
-  config = get_config("tiny")
-  config.model.sh_degree = _SH_DEGREE.value
-  config.model.init_points = _POINTS.value
-  config.data.background = (0.0, 0.0, 0.0)
-  config.densify.start = 10**9
-  config.densify.sh_degree_every = 1  # the full SH degree from the first step
-  config.train.num_steps = 100_000  # only the Sobol rows and schedules follow it
-  config.render.max_intersections = light_config.render.max_intersections
-  return config
+  settings = TrainSettings(
+      num_steps=100_000,  # only the Sobol rows and schedules follow it
+      background=(0.0, 0.0, 0.0), sh_degree_every=1,  # the full SH degree from the first step
+      densify=DensifySettings.off(), render=light.settings.render)
+  init = InitSettings(sh_degree=_SH_DEGREE.value, init_points=_POINTS.value)
+  return Recipe(settings, init, SamplerSpec.default(GROUPS, extent=extent), extent)
 
 
 def _timed(fn, *args):
@@ -93,56 +96,64 @@ def _grown(make_step, setup_settings, state, args):
 
 def run(rounds, steps, repeats):
   """The benchmark; returns its JSON dict (see the module docstring)."""
-  import dataclasses
-
   import jax
   import jax.numpy as jnp
   import numpy as np
 
+  from mfsample.config_blocks import data_spec
+  from mfsample.data.datasets import load_light_data, scene_extent
   from mfsample.lighting import captures, lights, training
   from mfsample.lighting import uncertainty as lu
+  from mfsample.lighting.config import light_recipe
   from mfsample.model import group_shapes
+  from mfsample.samplers import sample_z
   from mfsample.train import loop
   from mfsample.train.step import make_train_step
-  from mfsample.uncertainty import uncertainty_z
 
   lc = _light_config()
   n = lc.model.light_coeffs
-  data = captures.make_light_data(lc.data, n)
+  data = load_light_data(data_spec(lc.data), n)
   cams = captures.to_device_cameras(data.train_cameras)
+  num_views = len(data.train_cameras)
   num_lights = 4
   rng = np.random.default_rng(0)
   used = np.stack([lights.uniform_light(n)] + [lights.on_sphere(rng.normal(size=n))
                                                for _ in range(num_lights - 1)])
   images = jnp.asarray(np.stack([captures.capture(data.train_basis, x) for x in used]))
   light_array = jnp.asarray(used, jnp.float32)
-  lsetup = training.make_setup(lc, data.train_cameras, 100_000)
-  lstate = training.init_state(lc, lsetup, data.bounds)
+  extent = lc.model.extent
+  if extent is None:  # 3DGS's, from the training cameras (as the protocol)
+    extent = scene_extent(data.train_cameras)
+  lrecipe = light_recipe(lc, extent)
+  # Only the Sobol rows and schedules follow the run's length: long enough for every round.
+  lrecipe = lrecipe._replace(settings=lrecipe.settings.replace(num_steps=100_000))
+  seed = int(lc.seed)
+  lsetup, lstate = training.start(lrecipe, seed, data.bounds)
 
-  cc = _colour_config(lc)
+  # The same random points in the same box (the colour recipe's random start draws them as
+  # the relightable one does).
+  crecipe = _colour_recipe(lrecipe, extent)
+  cmodel = crecipe.initial_model(seed=seed, bounds=data.bounds)
+  csetup = loop.make_setup(crecipe.settings, cmodel, seed=seed, extent=extent,
+                           num_views=num_views)
+  cstate = loop.init_state(cmodel, csetup)
   colour_images = jnp.clip(images[0], 0.0, 1.0)
-  from mfsample.data.views import Views
-  views = Views(np.asarray(colour_images), data.train_cameras)
-  csetup = loop.make_setup(cc, views, extent=lsetup.extent)
-  cstate = loop.init_state(cc, csetup, data.bounds)
-  m_c = csetup.step_config.num_samples
-  m_l = lsetup.step_config.num_samples
 
   def light_args(step):
-    light, view = training.pair_for_step(0, step, 0, len(data.train_cameras), num_lights)
-    return ((images, light_array, cams), (jnp.int32(light), jnp.int32(view)),
-            lsetup.sobol[step * m_l:(step + 1) * m_l])
+    light, view = training.pair_for_step(seed, step, 0, num_views, num_lights)
+    return ((images, light_array, cams),
+            (jnp.asarray([light], jnp.int32), jnp.asarray([view], jnp.int32)),
+            loop.step_rows(lsetup, step))
 
   def colour_args(step):
-    return ((colour_images, cams), jnp.int32(step % len(data.train_cameras)),
-            csetup.sobol[step * m_c:(step + 1) * m_c])
+    return ((colour_images, cams), jnp.asarray([step % num_views], jnp.int32),
+            loop.step_rows(csetup, step))
 
-  light_fn = _grown(lambda s: make_train_step(
-      dataclasses.replace(lsetup.step_config, settings=s), lsetup.field),
-      lsetup.step_config.settings, lstate, light_args)
-  colour_fn = _grown(lambda s: make_train_step(
-      dataclasses.replace(csetup.step_config, settings=s)), csetup.step_config.settings,
-      cstate, colour_args)
+  light_fn = _grown(lambda s: make_train_step(lsetup.step_config.with_settings(s),
+                                              lsetup.field),
+                    lsetup.step_config.settings, lstate, light_args)
+  colour_fn = _grown(lambda s: make_train_step(csetup.step_config.with_settings(s)),
+                     csetup.step_config.settings, cstate, colour_args)
 
   def light_one(state):
     return light_fn(state, *light_args(int(state.step)))[0]
@@ -177,7 +188,7 @@ def run(rounds, steps, repeats):
   from mfsample.planning.poses import downscale_camera
 
   model = lstate.model
-  z = uncertainty_z(model, 2, 6174)
+  z = sample_z(model, 2, seed=6174)
   cams = downscale_camera(cams, _U_DOWNSCALE.value)
   xi = jnp.asarray(used[1], jnp.float32)
   _, settings = lu.light_uncertainty_fitted(model, cams, z, xi,

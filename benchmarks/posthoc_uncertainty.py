@@ -1,6 +1,6 @@
 """Post-hoc U of a pretrained model against the U of a jointly trained field.
 
-A user's 3DGS model was trained without B_hat. `mfsample.train.posthoc.fit_spread` fits B_hat
+A user's 3DGS model was trained without B_hat. `mfsample.train.fit_b_hat` fits B_hat
 afterwards with the model frozen. Is that U as good a guide to the next view as the U of a
 field trained jointly (the paper's)? Both are judged by the measure the project uses for
 that question (`mfsample.planning.u_error`): Spearman's rho, over the unused candidate views,
@@ -58,28 +58,44 @@ def _farthest_views(pool, config, seed, num_views):
 
   config = config.copy_and_resolve_references()
   config.max_views = num_views
-  selected, _ = runner.plan_views(strategies.make_strategy("farthest", config), pool, config,
-                                  seed, runner.Trainer(config, pool))
+  selected, _ = runner.plan_views(strategies.make_strategy("farthest"), pool, config, seed,
+                                  runner.Trainer(config, pool))
   return selected
+
+
+def _posthoc_start(plan, ply_path, seed):
+  """The stochastic field of `plan` (a `Recipe`) whose mean is the 3DGS model at `ply_path`
+  (its SH degree the file's), B_hat fresh: the start of the post-hoc fit."""
+  import numpy as np
+
+  from mfsample.data.ply import load_ply, sh_degree_of
+
+  init = plan.init.replace(init_from="ply", ply_path=ply_path,
+                           sh_degree=sh_degree_of(load_ply(ply_path)))
+  return plan._replace(init=init).initial_model(seed=seed, bounds=(np.zeros(3), np.ones(3)))
 
 
 def run():
   import jax
   import numpy as np
 
-  from mfsample import uncertainty as unc
+  from mfsample.config_blocks import data_spec
   from mfsample.data.ply import export_ply
+  from mfsample.jobs import Budgets
   from mfsample.planning import runner
   from mfsample.planning.config import get_config as planning_config
   from mfsample.planning.pool import make_pool
   from mfsample.planning.u_error import u_against_error
-  from mfsample.train.posthoc import fit_spread
+  from mfsample.samplers import sample_z
+  from mfsample.train.posthoc import run_b_hat_fit
 
   comp = _COMPARISON.value
   config = planning_config(comp.planning_variant)
   config.data.progress = False
-  pool = make_pool(config.data)
+  pool = make_pool(data_spec(config.data))
   trainer = runner.Trainer(config, pool)
+  # The round config's loss, learning rates and bounds, with the joint model's sampler.
+  plan = runner.round_recipe(config, "lowrank")
   seeds, counts = [int(s) for s in comp.seeds], [int(v) for v in comp.views]
   trajectories = {seed: _farthest_views(pool, config, seed, max(counts)) for seed in seeds}
   down = int(config.rounds.downscale)
@@ -87,37 +103,44 @@ def run():
   m = int(comp.samples)
   rows = {"joint": []} | {f"posthoc_{s}": [] for s in comp.posthoc_steps}
   seconds = {name: [] for name in rows}
-  settings = {}
+  budgets = Budgets()
   tmp = tempfile.mkdtemp(prefix="posthoc_")
   for seed, n in itertools.product(seeds, counts):
     selected = trajectories[seed][:n]
     used = [view.index for view in selected]
+    unused = np.setdiff1d(np.arange(len(pool.candidates)), used)
     t0 = time.perf_counter()
-    joint = trainer.round_state("lowrank", selected, seed)
+    joint, budgets = trainer.round_state("lowrank", selected, seed, budgets)
     seconds["joint"].append(time.perf_counter() - t0)
-    plain = trainer.round_state("deterministic", selected, seed)
+    plain, budgets = trainer.round_state("deterministic", selected, seed, budgets)
     ply = os.path.join(tmp, f"seed{seed}_views{n}.ply")
     export_ply(ply, plain.model)
     views = runner.as_views(selected, down)
-    padded = views.subset(np.minimum(np.arange(pad_to), n - 1))
+    # Padded to the rounds' image slots (one compilation for every view count); the steps
+    # draw among the n real views only.
+    padded = views.subset(np.minimum(np.arange(pad_to), n - 1)).replace(names=())
     models = {"joint": joint.model}
     for steps in comp.posthoc_steps:
-      cfg = runner.round_config(config, "lowrank")
-      with cfg.unlocked():
-        cfg.seed = seed
-        cfg.train.num_steps = int(steps)
       t0 = time.perf_counter()
-      fitted = fit_spread(cfg, padded, ply, num_views=n, settings=plain.settings)
-      jax.block_until_ready(fitted.state.model.params.spread)
+      model = _posthoc_start(plan, ply, seed)
+      if int(steps) > 0:  # 0: B_hat as initialised, nothing fitted
+        settings = plan.with_render(plain.settings).settings.replace(num_steps=int(steps))
+        model = run_b_hat_fit(model, padded, settings, seed=seed, extent=plan.extent,
+                              num_views=n).state.model
+      jax.block_until_ready(model.params.b_hat)
       seconds[f"posthoc_{steps}"].append(time.perf_counter() - t0)
-      models[f"posthoc_{steps}"] = fitted.state.model
+      models[f"posthoc_{steps}"] = model
     for name, model in models.items():
-      z = unc.uncertainty_z(model, m, int(config.strategy.ours.z_seed))
-      res = u_against_error(model, pool.candidates, used, z, background=pool.background,
+      z = sample_z(model, m, seed=int(config.strategy.ours.z_seed))
+      res = u_against_error(model, pool.candidates.cameras[unused], z,
+                            background=pool.background,
+                            images=np.asarray(pool.candidates.images)[unused],
+                            train_cameras=pool.candidates.cameras[np.asarray(used)],
                             center=pool.sphere.center,
                             score_downscale=int(config.strategy.ours.score_downscale),
-                            settings=settings)
-      settings = res.settings
+                            score_settings=budgets.get("score"),
+                            mean_settings=budgets.get("mean"))
+      budgets = budgets.replace(score=res.score_settings, mean=res.mean_settings)
       rows[name].append({"seed": seed, "views": n, "rho_u_error": res.rho_u_error,
                          "rho_u_angle": res.rho_u_angle, "mean_error": float(res.error.mean())})
     print(f"seed {seed}, {n} views: " + ", ".join(

@@ -72,22 +72,33 @@ def summarize(times, items):
 
 
 def setup_run(*, batch_size, resolution, points):
-  """(config, dataset, setup, state) of a rank-2 field on the tiny synthetic scene at
-  `resolution` with `points` random initial Gaussians, trained with `batch_size` views per
-  step."""
-  from mfsample.data import datasets as data_lib
-  from mfsample.train import loop
-  from mfsample.train.config import get_config
+  """(views, setup, state) of a rank-2 field of `points` random Gaussians at its first step,
+  trained with `batch_size` views per step on the tiny synthetic scene (random Gaussians seen
+  by max(12, `batch_size`) orbit views at `resolution`, on black:
+  `mfsample.testing.synthetic_views`)."""
+  import jax
+  import numpy as np
 
-  config = get_config("tiny")
-  config.data.synthetic.width = config.data.synthetic.height = resolution
-  config.data.synthetic.num_train = max(12, batch_size)
-  config.model.init_points = points
-  config.model.max_gaussians = points
-  config.train.batch_size = batch_size
-  dataset = data_lib.load_dataset(config.data)
-  setup = loop.make_setup(config, dataset.train)
-  return config, dataset, setup, loop.init_state(config, setup, dataset.bounds)
+  from mfsample import testing
+  from mfsample.data.datasets import scene_extent
+  from mfsample.groups import GROUPS
+  from mfsample.model import init_model
+  from mfsample.renderer import RenderSettings
+  from mfsample.samplers import SamplerSpec
+  from mfsample.train import TrainSettings, loop
+
+  background = (0.0, 0.0, 0.0)
+  views, _ = testing.synthetic_views(max(12, batch_size), size=resolution,
+                                     background=background)
+  extent = scene_extent(views.cameras)
+  settings = TrainSettings(batch_size=batch_size, background=background,
+                           render=RenderSettings(max_intersections=1 << 12))
+  # Uniform in the scene box (the ground truth's cube + 0.2), as a run without SfM starts.
+  xyz = np.random.default_rng(0).uniform(-0.8, 0.8, (points, 3))
+  model = init_model(jax.random.PRNGKey(0), xyz, spec=SamplerSpec.default(GROUPS, extent=extent),
+                     sh_degree=0, init_scales=settings.b_hat_init_scales(extent))
+  setup = loop.make_setup(settings, model, seed=0, extent=extent, num_views=len(views))
+  return views, setup, loop.init_state(model, setup)
 
 
 def scoring(devices, model, *, resolution, num_candidates, samples, rounds):
@@ -96,14 +107,15 @@ def scoring(devices, model, *, resolution, num_candidates, samples, rounds):
   import jax.numpy as jnp
   import numpy as np
 
-  from mfsample import uncertainty as unc
+  from mfsample import view_uncertainty as unc
   from mfsample.planning import poses
   from mfsample.renderer import RenderSettings
+  from mfsample.samplers import sample_z
 
   sphere = poses.SphereSpec(radius=3.0, width=resolution, height=resolution)
   uv = poses.random_uv(np.random.default_rng(0), num_candidates, sphere).astype(np.float32)
   cams = poses.spherical_camera(jnp.asarray(uv), sphere)
-  z = unc.uncertainty_z(model, samples, 6174)
+  z = sample_z(model, samples, seed=6174)
   _, settings = unc.score_cameras(model, cams, z, settings=RenderSettings(
       max_intersections=512), num_devices=1)  # the budget that holds every candidate
   fns = {n: (lambda n=n: unc.score_cameras(model, cams, z, settings=settings,
@@ -111,32 +123,31 @@ def scoring(devices, model, *, resolution, num_candidates, samples, rounds):
   return summarize(alternate(fns, rounds), num_candidates), settings.max_intersections
 
 
-def training(devices, config, dataset, setup, state, *, rounds):
-  """The first training step (`setup`'s batch of views) split over each device count."""
+def training(devices, views, setup, state, *, rounds):
+  """The first training step (`setup`'s batch of `views`) split over each device count."""
   import dataclasses
 
   from mfsample import sharding
-  from mfsample.data import datasets as data_lib
+  from mfsample.data.datasets import to_device
   from mfsample.train import loop
   from mfsample.train.step import make_train_step
 
-  views = data_lib.to_device(dataset.train)
-  batch_size = setup.step_config.batch_size
-  index = loop.views_for_step(setup.seed, 0, len(views), batch_size)
-  rows = loop.step_sobol(setup, 0)
+  data = to_device(views)
+  data = (data.images, data.cameras)
+  batch_size = setup.settings.batch_size
+  index, rows = loop.step_targets(setup, 0, len(views))
   # One step on one device grows the budget until nothing overflows; every variant then
   # starts from that budget, so no timed step overflows.
   one = setup._replace(step_config=dataclasses.replace(setup.step_config, num_devices=1))
-  for done in loop.run_steps(config, one, state, (views.images, views.cameras),
-                             pick=lambda s: index, end=1):
+  for done in loop.run_steps(one, state, data, pick=lambda s: (index, rows), end=1):
     settings = done.setup.step_config.settings
   fns = {}
   for n in devices:
     cfg = dataclasses.replace(setup.step_config, settings=settings, num_devices=n)
     fn = make_train_step(cfg, setup.field)
-    data = sharding.replicated((views.images, views.cameras), n)
+    placed_data = sharding.replicated(data, n)
     placed = sharding.replicated(state, n)
-    fns[n] = lambda fn=fn, data=data, placed=placed: fn(placed, data, index, rows)[1].loss
+    fns[n] = lambda fn=fn, d=placed_data, p=placed: fn(p, d, index, rows)[1].loss
   return summarize(alternate(fns, rounds), batch_size), settings.max_intersections
 
 
@@ -156,12 +167,12 @@ def main(argv):
   if skipped:
     print(f"only {jax.device_count()} devices: skipping {skipped}")
   load_start = load_average()
-  config, dataset, setup, state = setup_run(batch_size=_BATCH.value, resolution=_RES.value,
-                                            points=_POINTS.value)
+  views, setup, state = setup_run(batch_size=_BATCH.value, resolution=_RES.value,
+                                  points=_POINTS.value)
   score, score_budget = scoring(devices, state.model, resolution=_RES.value,
                                 num_candidates=_CANDS.value, samples=_M.value,
                                 rounds=_ROUNDS.value)
-  train, train_budget = training(devices, config, dataset, setup, state, rounds=_ROUNDS.value)
+  train, train_budget = training(devices, views, setup, state, rounds=_ROUNDS.value)
   print(f"{'devices':>8} {'candidates/s':>13} {'speed-up':>9} {'CPU x':>6} "
         f"{'views/s':>9} {'speed-up':>9} {'CPU x':>6}")
   for n in devices:

@@ -79,18 +79,29 @@ def load_run(workdir, data=None):
   import ml_collections
 
   from mfsample._bench import require_scene_folder
+  from mfsample.config_blocks import data_spec
   from mfsample.data import datasets as data_lib
   from mfsample.train import loop
+  from mfsample.train.config import recipe
+  from mfsample.workdir import WRITTEN_BY
 
   with open(os.path.join(workdir, "config.json")) as f:
-    config = ml_collections.ConfigDict(json.load(f))
+    record = json.load(f)
+  config = ml_collections.ConfigDict({k: v for k, v in record.items() if k != WRITTEN_BY})
   if config.data.kind == "blender" and data is not None:
     require_scene_folder(data, "--data")
     config.data.path = data
-  dataset = data_lib.load_dataset(config.data)
-  setup = loop.make_setup(config, dataset.train)
+  dataset = data_lib.load_dataset(data_spec(config.data))
+  # The run's start and setup, as the training job built them: the template of its state.
+  seed, extent = int(config.seed), config.data.extent
+  if extent is None:
+    extent = data_lib.scene_extent(dataset.train.cameras)
+  plan = recipe(config, extent=extent)
+  model = plan.initial_model(seed=seed, bounds=dataset.bounds, points=dataset.points)
+  setup = loop.make_setup(plan.settings, model, seed=seed, extent=extent,
+                          num_views=len(dataset.train))
   restored = loop.restore_latest(os.path.join(workdir, "checkpoints"), setup,
-                                 lambda: loop.init_state(config, setup, dataset.bounds))
+                                 lambda: loop.init_state(model, setup))
   if restored is None:
     raise FileNotFoundError(f"no checkpoint in {workdir}/checkpoints")
   state, setup, _ = restored
@@ -131,7 +142,7 @@ def _scores(model, cameras, z, settings, background):
   """U of every camera (sequential, budget grown until nothing overflows)."""
   import numpy as np
 
-  from mfsample import uncertainty as unc
+  from mfsample import view_uncertainty as unc
   from mfsample.renderer.budget import render_with_budget
 
   values = []
@@ -143,7 +154,7 @@ def _scores(model, cameras, z, settings, background):
 
 
 def _ms_one_candidate(model, camera, z, settings, background, repeats):
-  from mfsample import uncertainty as unc
+  from mfsample import view_uncertainty as unc
 
   return 1e3 * timed(lambda: unc.uncertainty(model, camera, z, settings=settings,
                                              background=background).value, repeats)[1]
@@ -173,25 +184,25 @@ def samples_and_resolution(model, dataset, settings, *, candidates, samples, ref
   import jax.numpy as jnp
   import numpy as np
 
-  from mfsample import uncertainty as unc
   from mfsample.planning.poses import downscale_camera
+  from mfsample.samplers import sample_z
 
   bg = jnp.asarray(dataset.background, jnp.float32)
   train = dataset.train
   idx = np.linspace(0, len(train) - 1, candidates).round().astype(int)
   cams = train.cameras[idx]
-  ref_z = unc.uncertainty_z(model, reference_samples, seed=10_000)
+  ref_z = sample_z(model, reference_samples, seed=10_000)
   ref, settings = _scores(model, cams, ref_z, settings, bg)
   out = {"live_gaussians": model.num_live, "resolution": cams.width, "candidates": len(idx),
          "reference_samples": reference_samples, "samples": [], "downscales": []}
   for m in map(int, samples):
     errors, rhos = [], []
     for seed in range(scrambles):
-      z = unc.uncertainty_z(model, m, seed=seed)
+      z = sample_z(model, m, seed=seed)
       values, settings = _scores(model, cams, z, settings, bg)
       errors.extend(np.abs(values - ref) / ref)
       rhos.append(_spearman(values, ref))
-    z = unc.uncertainty_z(model, m, seed=0)
+    z = sample_z(model, m, seed=0)
     row = {"M": m, "ms_per_candidate": _ms_one_candidate(model, cams[0], z, settings, bg,
                                                          repeats),
            "median_relative_error": float(np.median(errors)),
@@ -201,7 +212,7 @@ def samples_and_resolution(model, dataset, settings, *, candidates, samples, ref
           f"U error {row['median_relative_error']:.3f}, rank corr "
           f"{row['spearman_vs_reference']:.3f}", flush=True)
 
-  z = unc.uncertainty_z(model, 2, seed=0)
+  z = sample_z(model, 2, seed=0)
   full, settings = _scores(model, cams, z, settings, bg)
   for d in map(int, downscales):
     small = downscale_camera(cams, d)

@@ -2,7 +2,7 @@
 
 Trains each variant of the lego config (`configs/train.py:lego`) at --size for --steps on
 all 100 training views, in its own workdir under --workdir, with
-`mfsample.train.train_and_evaluate` (the function behind `experiments/train.py`), and
+`mfsample.train.experiment.train_and_evaluate` (the function behind `experiments/train.py`), and
 gathers the test PSNR / SSIM / LPIPS of the 200 test views into one table and JSON. Runs
 resume from their checkpoints, so a killed benchmark continues where it stopped; finished
 variants are only collected. A workdir made with another config is refused, naming the
@@ -96,11 +96,14 @@ def variant_config(base, name, overrides=None):
 
 
 def _comparable(config_dict):
-  """What a run's results depend on: its config less the speed-only and display fields."""
+  """What a run's results depend on: its config less the speed-only and display fields (and
+  the record of the job and version that wrote it)."""
   from mfsample._json import without_fields
-  from mfsample.train.loop import SPEED_ONLY_FIELDS
+  from mfsample.config_blocks import speed_only_fields
+  from mfsample.workdir import WRITTEN_BY
 
-  return without_fields(config_dict, SPEED_ONLY_FIELDS + ("train.progress",))
+  return without_fields({k: v for k, v in config_dict.items() if k != WRITTEN_BY},
+                        speed_only_fields() + ("train.progress",))
 
 
 def train_variant(config, workdir):
@@ -113,7 +116,7 @@ def train_variant(config, workdir):
     {field: value} for `ROW_FIELDS` from the run's `metrics.json`.
   """
   from mfsample.train import checkpoint as ckpt
-  from mfsample.train import train_and_evaluate
+  from mfsample.train.experiment import train_and_evaluate
   from mfsample.workdir import differences
 
   new = _comparable(json.loads(config.to_json_best_effort()))

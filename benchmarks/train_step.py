@@ -33,7 +33,6 @@ the configured start budget is not compiled twice.
 """
 
 import copy
-import dataclasses
 import json
 import os
 import statistics
@@ -97,9 +96,10 @@ def base_config(data, size, points, samples):
     return config, "lego"
   config.data.kind = "synthetic"
   config.data.init_bounds = (-0.8, 0.8)
+  config.data.width = config.data.height = size
+  config.data.num_train, config.data.num_test = 16, 1
   syn = config.data.synthetic
-  syn.num_gaussians, syn.width, syn.height, syn.sh_degree = 2000, size, size, 3
-  syn.num_train, syn.num_test = 16, 1
+  syn.num_gaussians, syn.sh_degree = 2000, 3
   return config, "synthetic"
 
 
@@ -129,13 +129,12 @@ def variant_config(base, variant):
 def _from_trained(fresh, setup, checkpoint_dir):
   """`fresh` with the mean Gaussians of the newest checkpoint in `checkpoint_dir` and fresh
   B_hat entries of `fresh`'s sampler (only the mean is taken: any sampler may have trained)."""
-  import jax
   import jax.numpy as jnp
   import numpy as np
 
-  from mfsample.model import Model, Params, init_spread
+  from mfsample.model import Model, Params, init_b_hat
   from mfsample.train import checkpoint as ckpt
-  from mfsample.train.step import init_train_state
+  from mfsample.train import loop
 
   paths = ckpt.list_checkpoints(checkpoint_dir)
   if not paths:
@@ -147,16 +146,16 @@ def _from_trained(fresh, setup, checkpoint_dir):
   mask = np.asarray(arrays[".model.mask"])
   capacity, live = mask.shape[0], int(mask.sum())
   shapes = {g: v.shape[1:] for g, v in mean.items()}
-  spread, signs = init_spread(np.random.default_rng(0), live, shapes, setup.spec,
-                              setup.init_scales)
+  spec = fresh.model.spec
+  b_hat, signs = init_b_hat(np.random.default_rng(0), live, shapes, spec, setup.init_scales)
 
   def pad(x):
     return jnp.asarray(np.concatenate([x, np.zeros((capacity - live,) + x.shape[1:], x.dtype)]))
 
-  model = Model(Params(mean, {g: pad(v) for g, v in spread.items()}),
+  model = Model(Params(mean, {g: pad(v) for g, v in b_hat.items()}),
                 {g: pad(v) for g, v in signs.items()}, jnp.asarray(mask),
-                jnp.asarray(int(arrays[".model.sh_degree"]), jnp.int32), setup.spec)
-  return init_train_state(model, setup.step_config, jax.random.PRNGKey(0))
+                jnp.asarray(int(arrays[".model.sh_degree"]), jnp.int32), spec)
+  return loop.init_state(model, setup)
 
 
 def measure_variant(config, *, steps, warmup, from_checkpoints=None, clock="wall",
@@ -193,20 +192,27 @@ def measure_variant(config, *, steps, warmup, from_checkpoints=None, clock="wall
     render_intersections and outside_renderer_share.
   """
   import jax
-  import jax.numpy as jnp
   import numpy as np
 
   from mfsample._bench import device_memory_mb, fitted_settings, peak_rss_mb, time_render
+  from mfsample.config_blocks import data_spec
   from mfsample.data import datasets as data_lib
   from mfsample.model import mean_gaussians
   from mfsample.renderer.budget import fit_budget
   from mfsample.train import loop
+  from mfsample.train.config import recipe
   from mfsample.train.step import make_train_step
 
-  dataset = data_lib.load_dataset(config.data)
+  dataset = data_lib.load_dataset(data_spec(config.data))
   views = data_lib.to_device(dataset.train)
-  setup = loop.make_setup(config, dataset.train)
-  state = loop.init_state(config, setup, dataset.bounds)
+  seed, num_views = int(config.seed), len(dataset.train)
+  extent = config.data.extent
+  if extent is None:  # 3DGS's, from the training cameras (as the training job)
+    extent = data_lib.scene_extent(dataset.train.cameras)
+  plan = recipe(config, extent=extent)
+  model = plan.initial_model(seed=seed, bounds=dataset.bounds, points=dataset.points)
+  setup = loop.make_setup(plan.settings, model, seed=seed, extent=extent, num_views=num_views)
+  state = loop.init_state(model, setup)
   if from_checkpoints:
     state = _from_trained(state, setup, from_checkpoints)
   m = setup.step_config.num_samples
@@ -215,23 +221,19 @@ def measure_variant(config, *, steps, warmup, from_checkpoints=None, clock="wall
     fitted = fitted_settings(mean_gaussians(state.model), first_camera,
                              setup.step_config.settings)
     if fitted.max_intersections > setup.step_config.settings.max_intersections:
-      setup = setup._replace(step_config=dataclasses.replace(setup.step_config,
-                                                             settings=fitted))
+      setup = setup.with_settings(fitted)
   fn = make_train_step(setup.step_config)
   timer = time.process_time if clock == "process" else time.perf_counter
   t0 = time.perf_counter()
   step, times = 0, []
   while step < warmup + steps:
-    view = jnp.int32(loop.view_for_step(0, step, len(views)))
-    rows = setup.sobol[step * m:(step + 1) * m]
+    index, rows = loop.step_targets(setup, step, num_views)
     t = timer()
-    new_state, metrics = fn(state, (views.images, views.cameras), view, rows)
+    new_state, metrics = fn(state, (views.images, views.cameras), index, rows)
     jax.block_until_ready(new_state)
     dt = timer() - t
     if bool(metrics.overflow):
-      settings = fit_budget(setup.step_config.settings, metrics)
-      setup = setup._replace(step_config=dataclasses.replace(setup.step_config,
-                                                             settings=settings))
+      setup = setup.with_settings(fit_budget(setup.step_config.settings, metrics))
       fn = make_train_step(setup.step_config)
       continue
     state = new_state

@@ -24,7 +24,7 @@ _OUT = flags.DEFINE_string("out", "docs/assets/your_data_loop.png", "Figure path
 
 def loop_config(capture):
   """The your-data job's config for the tiny capture (every field else the default)."""
-  from mfsample.next_views import default_config
+  from mfsample.your_data import default_config
 
   config = default_config()
   config.data.kind = "nerfstudio"
@@ -117,7 +117,7 @@ def figure(workdir, out):
 
 def main(argv):
   del argv
-  from mfsample.next_views import run_next_views
+  from mfsample.your_data import run_next_views
 
   root = os.path.abspath(_WORKDIR.value)
   write_capture(os.path.join(root, "capture"))

@@ -1,7 +1,7 @@
 """Uncertainty maps and next views: `experiments/next_views.py --config=configs/next_views.py`.
 
 Variants combine, comma-separated (the defaults and a comment on every field:
-`mfsample.next_views.config`), e.g. `--config=configs/next_views.py:colmap,posthoc`:
+`mfsample.your_data.config`), e.g. `--config=configs/next_views.py:colmap,posthoc`:
 
   (none)   the built-in Mitsuba scene at 64 x 64: a field trained on every 4th of its 100
            candidate views (2000 steps), the other 75 ranked by U; about 5 minutes of CPU
@@ -16,4 +16,4 @@ Variants combine, comma-separated (the defaults and a comment on every field:
 docs/your_data.md has the commands.
 """
 
-from mfsample.next_views.config import VARIANTS, get_config  # noqa: F401 (the variants live there)
+from mfsample.your_data.config import VARIANTS, get_config  # noqa: F401 (the variants live there)

@@ -10,7 +10,7 @@ workdir; running again on the same workdir resumes (docs/your_data.md).
 """
 
 from mfsample import jobs
-from mfsample.next_views.runner import JOB
+from mfsample.your_data.runner import JOB
 
 if __name__ == "__main__":
   jobs.main(JOB)

@@ -21,7 +21,8 @@ import numpy as np
 
 from mfsample.camera import Camera
 from mfsample.gaussians import Gaussians
-from mfsample.testing import orbit_camera, random_gaussians
+from mfsample.orbits import orbit_camera
+from mfsample.testing import random_gaussians
 
 GARDEN_CROP = 2.0  # gsplat's crop box [-2, 2]^3
 GARDEN_POINTS = 111_785  # garden's points inside the crop box
@@ -99,5 +100,5 @@ def random_cell(num, resolution, *, seed=0):
   `resolution` x `resolution` from an orbit camera 3.5 units away: the cells of
   `benchmarks/render.py`."""
   gaussians = random_gaussians(num, sh_degree=3, seed=seed, scale_range=(0.005, 0.05))
-  camera = orbit_camera(resolution, resolution, distance=3.5, fov_x=0.9)
+  camera = orbit_camera(0.3, 0.4, width=resolution, height=resolution, distance=3.5, fov_x=0.9)
   return Workload(gaussians, camera, f"{num} random Gaussians at {resolution} x {resolution}")

@@ -1,5 +1,9 @@
 """Config validation on entry: every error names the field, its value and what is allowed.
 
+Most rules live with the typed settings a config block is translated into (`translated`
+re-raises a settings object's error naming the config field); the checks below serve the
+fields that only a job reads.
+
 Experiments call these before they write anything, so a bad command line fails at once
 with a message such as
 
@@ -9,8 +13,12 @@ instead of a ZeroDivisionError an hour later. `field` is a dotted path into the 
 (`"train.checkpoint_every"`); `prefix` names the config in messages (`"config.round_train"`).
 """
 
+import contextlib
 import math
+import re
 from numbers import Integral, Real
+
+from mfsample.settings_checks import SettingsError
 
 
 class ConfigError(ValueError):
@@ -166,3 +174,43 @@ def with_variants(config, variant, variants, where):
       raise ValueError(f"unknown variant {name!r} of {where}; known: {', '.join(variants)}")
     variants[name](config)
   return config
+
+
+_WHERE = re.compile(r"^(\w+)\.(\w+)(?:\[(.+)\])?$")
+
+
+@contextlib.contextmanager
+def translated(fields, prefix="config"):
+  """Re-raises a `SettingsError` of the block (the settings built from a config block) as a
+  `ConfigError` naming the config field.
+
+  Args:
+    fields: {"Class.field" or "Class": dotted config path}: a class alone maps its fields
+      by name ("LossSettings": "loss" names LossSettings.ssim_weight "loss.ssim_weight"); a
+      mapping field's key is appended ("OptimSettings.b_hat_lr": "sampler.lr" names
+      b_hat_lr['means'] "sampler.lr.means").
+    prefix: the config's name in messages ("config", "config.round_train").
+  """
+  try:
+    yield
+  except SettingsError as e:
+    raise ConfigError(f"{prefix}.{config_field(e.where, fields)} = {e.value!r}: must be "
+                      f"{e.rule}") from None
+
+
+def config_field(where, fields):
+  """The dotted config path of a settings field `where` ("Class.field[key]")."""
+  m = _WHERE.match(where)
+  if m is None:
+    return where
+  cls, field, key = m.groups()
+  key = key.strip("'\"") if key else None
+  if f"{cls}.{field}" in fields:
+    path = fields[f"{cls}.{field}"]
+  elif cls in fields:
+    path = f"{fields[cls]}.{field}" if fields[cls] else field
+  else:
+    return where
+  if key:
+    path = f"{path}.{key}" if path else key
+  return path

@@ -53,7 +53,7 @@ from mfsample.renderer import render
 from mfsample.renderer.budget import render_with_budget
 from mfsample.renderer.settings import RenderSettings
 from mfsample.renderer.sh import sh_basis
-from mfsample.uncertainty import sample_gaussians, uncertainty_of_samples
+from mfsample.view_uncertainty import sample_gaussians, uncertainty_of_samples
 
 
 class GaussianUncertainty(NamedTuple):
@@ -130,7 +130,7 @@ def gaussian_uncertainty(model, cameras: Camera, z, *, settings: RenderSettings,
     model: `mfsample.model.Model` (any sampler; a deterministic one has share 0).
     cameras: `Camera`, one or batched over [V]; the views the shares are summed over (e.g.
       the training views, or the candidates of the next views).
-    z: [M, *samplers.z_shape(model)] samples of theta (`mfsample.uncertainty.uncertainty_z`).
+    z: [M, *samplers.z_shape(model)] samples of theta (`mfsample.samplers.sample_z`).
     settings: `RenderSettings` to start from; the intersection budget is grown on overflow
       (`render_with_budget`), never truncated.
     background: [3] colour behind the sample renders (default black), as for U.

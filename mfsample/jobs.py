@@ -35,7 +35,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from mfsample import distributed, interrupts
+from mfsample import config_record, distributed, interrupts
 from mfsample import workdir as workdir_lib
 from mfsample._json import atomic_path, write_json, write_text
 from mfsample.config_checks import ConfigError
@@ -48,6 +48,8 @@ class Job:
 
   Attributes:
     name: what it is called in messages and progress bars ("camera planning").
+    kind: its identifier in workdirs (`config.json` records it) and in the viewer
+      ("camera_planning").
     run: (config, workdir) -> results dict (it opens the workdir with `open_workdir`).
     validate: config -> None; raises `mfsample.config_checks.ConfigError` naming the field.
     free_fields: dotted config fields that may differ between calls on one workdir.
@@ -58,6 +60,7 @@ class Job:
   """
 
   name: str
+  kind: str
   run: Callable
   validate: Callable
   free_fields: tuple
@@ -88,11 +91,14 @@ class Workdir:
     return os.path.exists(self.file(*parts))
 
   def write_config(self):
-    """Records the config beside the results (after the guard and the data loaded)."""
+    """Records the config beside the results (after the guard and the data loaded), with
+    the job that writes them and the package version (`config_record.WRITTEN_BY`)."""
     if not self.writes:
       return
     os.makedirs(self.path, exist_ok=True)
-    workdir_lib.write_config(self.config, self.path)
+    config_record.write_config(self.config, self.path,
+                             {"job": self.job.kind, "name": self.job.name,
+                              "mfsample": package_version()})
 
   def write_json(self, name, obj, indent=1):
     """Writes `obj` as JSON to the entry `name`, atomically."""
@@ -158,6 +164,47 @@ class Workdir:
                 **kwargs)
 
 
+@dataclasses.dataclass(frozen=True)
+class Budgets:
+  """The render settings that sufficed for each kind of render a job makes (its purposes:
+  "eval", "score", "round_lowrank", ...), None where not known yet.
+
+  Budgets grow on overflow and are reused, so a later render of the same kind starts from a
+  budget that holds it (no regrowth, no recompilation); they change no result. The record is
+  immutable: whoever grows a budget returns it, and the job keeps a new record
+  (`replace`); nothing is updated behind another function's back.
+  """
+
+  settings: tuple = ()  # ((purpose, RenderSettings), ...)
+
+  def get(self, purpose, default=None):
+    """The settings of `purpose`, else `default`."""
+    return dict(self.settings).get(purpose, default)
+
+  def first(self, *purposes, default=None):
+    """The settings of the first of `purposes` that is known, else `default`."""
+    known = dict(self.settings)
+    return next((known[p] for p in purposes if known.get(p) is not None), default)
+
+  def replace(self, **settings):
+    """A copy with the settings of some purposes replaced (None values are ignored)."""
+    known = dict(self.settings)
+    known.update({p: v for p, v in settings.items() if v is not None})
+    return Budgets(tuple(sorted(known.items())))
+
+
+def package_version():
+  """The installed mfsample's version (the package's own when it is not installed)."""
+  from importlib import metadata
+
+  try:
+    return metadata.version("mfsample")
+  except metadata.PackageNotFoundError:
+    from mfsample import __version__
+
+    return __version__
+
+
 def check_workdir(job: Job, config, workdir):
   """Refuses `workdir` when it holds results of a config that differs from `config` in any
   field but `job.free_fields` (a stale config.json with no results beside it is replaced).
@@ -165,9 +212,9 @@ def check_workdir(job: Job, config, workdir):
   Raises:
     mfsample.workdir.WorkdirError: naming the differing fields, or the unreadable config.json.
   """
-  workdir_lib.check_same_config(
+  config_record.check_same_config(
       config, workdir, free_fields=job.free_fields,
-      has_results=workdir_lib.holds_results(workdir, *job.results),
+      has_results=config_record.holds_results(workdir, *job.results),
       results=f"{job.name} results",
       remedy="use a new --workdir, or the config that made them (or remove "
              + ", ".join(os.path.join(os.fspath(workdir), r) for r in job.results)
@@ -193,7 +240,7 @@ def open_workdir(job: Job, config, workdir):
   """
   job.validate(config)
   distributed.check_same_everywhere(
-      json.dumps(workdir_lib.config_dict(config), sort_keys=True), f"the {job.name} config")
+      json.dumps(config_record.config_dict(config), sort_keys=True), f"the {job.name} config")
   if not distributed.is_writer():
     distributed.share_outcome(None)  # raises process 0's refusal
     yield Workdir(job, config, workdir)

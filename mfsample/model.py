@@ -5,11 +5,14 @@ A model is a distribution over 3DGS parameters (paper Sec. 4.2, Eq. 7):
   theta(z) = mean + B_hat z,   z ~ U[-1, 1]^k,
 
 held as *raw*, unconstrained arrays grouped by meaning (the 3DGS parameterisation: centres,
-log-scales, unnormalised quaternions, opacity logits, SH coefficients). The generating
-matrix B_hat is parameterised per group as relu(raw) * sign with a fixed random sign per
+log-scales, unnormalised quaternions, opacity logits, SH coefficients). B_hat (the paper's
+generating matrix) is parameterised per group as relu(raw) * sign with a fixed random sign per
 entry (paper Sec. 4.3), so its columns point in diverse directions. Samples perturb the raw
 parameters; `activate` (the only place where constraints are applied) turns raw values into
 the renderer's `Gaussians`.
+
+`sample(model, z)` is the realisation theta(z) as `Gaussians`; the kinds of B_hat, z and the
+perturbation are `mfsample.samplers`'.
 
 Shapes are static: every array has a leading *capacity* axis C, and `mask` marks the live
 rows. Capacity grows on the host in buckets (`capacity_bucket`), never inside jit.
@@ -19,7 +22,6 @@ group without touching the samplers: every group is an array [C, ...] and the sa
 treat them alike.
 """
 
-import dataclasses
 from typing import NamedTuple
 
 import chex
@@ -30,20 +32,8 @@ import numpy as np
 from mfsample import arg_checks
 from mfsample._pytree import pytree_dataclass, replace, static_field
 from mfsample.gaussians import Gaussians
-
-# Raw parameter groups in a fixed order (the order of a flattened per-Gaussian vector, e.g.
-# the diagonal sampler's z). `sh_rest` exists only when the model's SH degree is above 0.
-GROUPS = ("means", "log_scales", "quats", "opacity_logits", "sh_dc", "sh_rest")
-# The relightable field's groups (`mfsample.lighting`): per-Gaussian transfer matrices in place
-# of SH colour, split like the SH colour into the outgoing DC row and the other rows (their own
-# learning rates). Every group a model may hold, in the canonical order of a flattened vector.
-TRANSFER_GROUPS = ("transfer_dc", "transfer_rest")
-GROUP_ORDER = GROUPS + TRANSFER_GROUPS
-
-# The kinds of generator B_hat (`SamplerSpec.kind`): the one definition every config
-# validator reads. The stochastic ones have a B_hat; "deterministic" is plain 3DGS.
-SAMPLER_KINDS = ("deterministic", "diagonal", "block", "lowrank")
-STOCHASTIC_KINDS = ("lowrank", "diagonal", "block")
+from mfsample.groups import GROUP_ORDER
+from mfsample.samplers import SamplerSpec, perturb
 
 # Log-scales are clamped to this range before exp: far beyond any real Gaussian (e^10 world
 # units), it keeps samples finite even when B_hat sits at its bounds with many columns
@@ -55,93 +45,18 @@ LOG_SCALE_RANGE = (-30.0, 10.0)
 _PAD_OPACITY_LOGIT = -20.0
 
 
-@dataclasses.dataclass(frozen=True)
-class SamplerSpec:
-  """Static description of the generator B_hat (hashable: part of the jit cache key).
-
-  Attributes:
-    kind: "deterministic" (no B_hat, plain 3DGS), "diagonal" (one independent uniform per
-      parameter entry), "block" (one block per Gaussian: k uniforms per Gaussian, so
-      Gaussians are independent and the entries of one Gaussian correlated) or "lowrank"
-      (k uniforms shared by the whole model; paper Eq. 7).
-    rank: k, columns of B_hat per entry (lowrank and block; ignored otherwise).
-    groups: the stochastic parameter groups (a subset of the model's groups); the others
-      are deterministic.
-    bounds: ((group, upper bound), ...): relu(raw) is kept in [0, bound] (authors' code:
-      raw entries are clamped after every step).
-  """
-
-  kind: str = "lowrank"
-  rank: int = 2
-  groups: tuple = ()
-  bounds: tuple = ()
-
-  def __post_init__(self):
-    if self.kind not in SAMPLER_KINDS:
-      raise ValueError(f"sampler kind must be one of {SAMPLER_KINDS}, got {self.kind!r}")
-    if isinstance(self.rank, bool) or not isinstance(self.rank, (int, np.integer)) or (
-        self.rank < 1):
-      raise ValueError(f"SamplerSpec.rank must be an integer >= 1 (k, columns of B_hat), got "
-                       f"{self.rank!r}")
-    _check_spec_groups(self)
-    missing = set(self.groups) - {g for g, _ in self.bounds}
-    if self.kind != "deterministic" and missing:
-      raise ValueError(f"no bound given for stochastic groups {sorted(missing)}")
-
-  @property
-  def stochastic(self):
-    return self.kind != "deterministic" and bool(self.groups)
-
-  @property
-  def columns(self):
-    """Trailing axis of a B_hat entry: k for lowrank/block, none for diagonal."""
-    return (self.rank,) if self.kind in ("lowrank", "block") else ()
-
-  def bound(self, group):
-    return dict(self.bounds)[group]
-
-
-def _check_spec_groups(spec):
-  """Groups: known and distinct; bounds: (known group, finite number > 0) pairs, one per group.
-  A bound of 0, a negative one or NaN would clamp B_hat to 0 (or NaN) after the first step:
-  a model trained silently into a deterministic one."""
-  for name in ("groups", "bounds"):
-    if not isinstance(getattr(spec, name), tuple):
-      raise ValueError(f"SamplerSpec.{name} must be a tuple (the spec is a static, hashable "
-                       f"jit argument), got {type(getattr(spec, name)).__name__}")
-  unknown = set(spec.groups) - set(GROUP_ORDER)
-  if unknown:
-    raise ValueError(f"unknown stochastic groups {sorted(unknown)}; known: {GROUP_ORDER}")
-  if len(set(spec.groups)) != len(spec.groups):
-    raise ValueError(f"SamplerSpec.groups repeats a group: {spec.groups}")
-  seen = set()
-  for item in spec.bounds:
-    if not isinstance(item, tuple) or len(item) != 2:
-      raise ValueError(f"SamplerSpec.bounds must hold (group, bound) pairs, got {item!r}")
-    group, bound = item
-    if group not in GROUP_ORDER:
-      raise ValueError(f"SamplerSpec.bounds names an unknown group {group!r}; known: "
-                       f"{GROUP_ORDER}")
-    if group in seen:
-      raise ValueError(f"SamplerSpec.bounds gives two bounds for {group!r}")
-    seen.add(group)
-    ok = isinstance(bound, (int, float, np.integer, np.floating)) and not isinstance(bound, bool)
-    if not ok or not np.isfinite(bound) or bound <= 0:
-      raise ValueError(f"SamplerSpec.bounds[{group!r}] must be a finite number > 0 (the "
-                       f"upper bound of |B_hat|), got {bound!r}")
-
-
 class Params(NamedTuple):
   """The trainable arrays (what the optimiser sees).
 
   Attributes:
     mean: {group: [C, ...]} raw 3DGS parameters, the mean of the distribution.
-    spread: {group: [C, ..., k] (lowrank, block) or [C, ...] (diagonal)} raw entries of
-      B_hat for the stochastic groups; empty for the deterministic sampler.
+    b_hat: {group: [C, ..., k] (lowrank, block) or [C, ...] (diagonal)} raw entries of
+      B_hat for the stochastic groups (B_hat = relu(raw) * sign,
+      `mfsample.samplers.signed_b_hat`); empty for the deterministic sampler.
   """
 
   mean: dict
-  spread: dict
+  b_hat: dict
 
 
 @pytree_dataclass
@@ -150,7 +65,7 @@ class Model:
 
   Attributes:
     params: `Params` (trainable).
-    signs: {group: int8 array shaped like params.spread[group]}: the fixed +-1 of B_hat.
+    signs: {group: int8 array shaped like params.b_hat[group]}: the fixed +-1 of B_hat.
     mask: [C] bool, True on live Gaussians.
     sh_degree: int32 scalar, the active SH degree (the 3DGS schedule raises it during
       training); higher bands are zeroed by `activate`, so shapes never change.
@@ -209,22 +124,6 @@ def capacity_bucket(n, minimum=256):
 # ------------------------------------------------------------------------- activation
 
 
-def spread_magnitude(spread):
-  """|B_hat| = relu(raw), per group: the one activation of B_hat's entries.
-
-  The relu takes gradient 1 at raw = 0 (`x >= 0`, not `x > 0`): the projection after each
-  optimiser step parks entries at exactly 0, and the volume term must be able to lift them
-  again (the authors clamp raw values in place, which has the same effect).
-  """
-  return {g: jnp.where(v >= 0, v, 0.0) for g, v in spread.items()}
-
-
-def generator(spread, signs):
-  """B_hat = relu(raw) * sign, per group (paper Sec. 4.3)."""
-  magnitude = spread_magnitude(spread)
-  return {g: magnitude[g] * signs[g].astype(magnitude[g].dtype) for g in magnitude}
-
-
 def activate(mean, mask, sh_degree):
   """Raw parameters -> `Gaussians` (the one place where constraints are applied).
 
@@ -256,14 +155,15 @@ def activate(mean, mask, sh_degree):
   )
 
 
-def mean_gaussians(model):
+def mean_gaussians(model: "Model") -> Gaussians:
   """The mean model's `Gaussians` (what evaluation and export use)."""
   return activate(model.params.mean, model.mask, model.sh_degree)
 
 
-def project_spread(spread, spec):
-  """Clamps raw B_hat entries into [0, bound] (after every optimiser step)."""
-  return {g: jnp.clip(v, 0.0, spec.bound(g)) for g, v in spread.items()}
+def sample(model: "Model", z: jax.Array) -> Gaussians:
+  """`Gaussians` of the realisation theta(z) = mean + B_hat z (paper Eq. 7; z of shape
+  `mfsample.samplers.z_shape(model)`). Vmap over z for M samples."""
+  return activate(perturb(model, z), model.mask, model.sh_degree)
 
 
 # ------------------------------------------------------------------------- construction
@@ -281,7 +181,7 @@ def host_rng(key):
   return np.random.default_rng(data.ravel().tolist())
 
 
-def init_spread(rng, num, shapes, spec, init_scales, dtype=np.float32):
+def init_b_hat(rng, num, shapes, spec, init_scales, dtype=np.float32):
   """Fresh B_hat entries for `num` Gaussians: raw ~ scale * U[0, 1], random signs.
 
   Args:
@@ -293,17 +193,17 @@ def init_spread(rng, num, shapes, spec, init_scales, dtype=np.float32):
       extent for centres and log-scales).
 
   Returns:
-    (spread {group: [num, ..., k]}, signs {group: int8 same shape}) as numpy arrays; empty
+    (b_hat {group: [num, ..., k]}, signs {group: int8 same shape}) as numpy arrays; empty
     for the deterministic sampler.
   """
-  spread, signs = {}, {}
+  b_hat, signs = {}, {}
   if not spec.stochastic:
-    return spread, signs
+    return b_hat, signs
   for g in sorted(set(spec.groups) & set(shapes), key=GROUP_ORDER.index):
     shape = (num,) + tuple(shapes[g]) + spec.columns
-    spread[g] = (init_scales[g] * rng.random(shape)).astype(dtype)
+    b_hat[g] = (init_scales[g] * rng.random(shape)).astype(dtype)
     signs[g] = np.where(rng.random(shape) < 0.5, 1, -1).astype(np.int8)
-  return spread, signs
+  return b_hat, signs
 
 
 def padding_values(shapes, num, dtype=np.float32):
@@ -318,8 +218,9 @@ def _pad(x, capacity, fill):
   return np.concatenate([x, fill[: capacity - x.shape[0]].astype(x.dtype)], axis=0)
 
 
-def init_model(key, points, *, spec, sh_degree, init_scales, capacity=None,
-               init_opacity=0.1, colors=None):
+def init_model(key: jax.Array, points: np.ndarray, *, spec: SamplerSpec, sh_degree: int,
+               init_scales: dict, capacity: int | None = None, init_opacity: float = 0.1,
+               colors: np.ndarray | None = None) -> "Model":
   """A model whose mean Gaussians sit at `points` (3DGS initialisation), float32.
 
   Scales follow 3DGS: the root mean squared distance to the 3 nearest neighbours (isotropic),
@@ -331,7 +232,7 @@ def init_model(key, points, *, spec, sh_degree, init_scales, capacity=None,
     points: [N, 3] initial centres (host array), N >= 1.
     spec: `SamplerSpec`.
     sh_degree: maximum SH degree (0..3); no SH-rest arrays when 0.
-    init_scales: {group: float} see `init_spread`.
+    init_scales: {group: float} see `init_b_hat`.
     capacity: C >= N (default `capacity_bucket(N)`).
     init_opacity: initial opacity in (0, 1).
     colors: optional [N, 3] RGB in [0, 1].
@@ -365,12 +266,12 @@ def init_model(key, points, *, spec, sh_degree, init_scales, capacity=None,
     mean["sh_rest"] = np.zeros((n,) + shapes["sh_rest"])
   pad = padding_values(shapes, capacity - n)
   mean = {g: jnp.asarray(_pad(v.astype(np.float32), capacity, pad[g])) for g, v in mean.items()}
-  spread, signs = init_spread(rng, n, shapes, spec, init_scales)
+  b_hat, signs = init_b_hat(rng, n, shapes, spec, init_scales)
   zeros = lambda x: np.zeros((capacity,) + x.shape[1:], x.dtype)
-  spread = {g: jnp.asarray(_pad(v, capacity, zeros(v))) for g, v in spread.items()}
+  b_hat = {g: jnp.asarray(_pad(v, capacity, zeros(v))) for g, v in b_hat.items()}
   signs = {g: jnp.asarray(_pad(v, capacity, zeros(v))) for g, v in signs.items()}
   mask = jnp.asarray(np.arange(capacity) < n)
-  return Model(Params(mean, spread), signs, mask, jnp.asarray(0, jnp.int32), spec)
+  return Model(Params(mean, b_hat), signs, mask, jnp.asarray(0, jnp.int32), spec)
 
 
 def model_from_mean(key, mean, *, spec, init_scales, capacity=None):
@@ -378,7 +279,7 @@ def model_from_mean(key, mean, *, spec, init_scales, capacity=None):
 
   The Gaussians are kept exactly as given; B_hat starts as in `init_model` (small random
   entries, fresh signs), ready to be fitted with the mean frozen
-  (`mfsample.train.posthoc.fit_spread`). The active SH degree is the full degree of `mean`:
+  (`mfsample.train.posthoc.fit_b_hat`). The active SH degree is the full degree of `mean`:
   a trained model uses every band it has.
 
   Args:
@@ -386,7 +287,7 @@ def model_from_mean(key, mean, *, spec, init_scales, capacity=None):
     mean: {group: [N, ...]} raw parameters of every group of `group_shapes(degree)` (e.g.
       `mfsample.data.ply.load_ply`), N >= 1.
     spec: `SamplerSpec`.
-    init_scales: {group: float} see `init_spread`.
+    init_scales: {group: float} see `init_b_hat`.
     capacity: C >= N (default `capacity_bucket(N)`).
 
   Returns:
@@ -414,12 +315,12 @@ def model_from_mean(key, mean, *, spec, init_scales, capacity=None):
   pad = padding_values(shapes, capacity - n)
   params = {g: jnp.asarray(_pad(np.asarray(v, np.float32), capacity, pad[g]))
             for g, v in mean.items()}
-  spread, signs = init_spread(host_rng(key), n, shapes, spec, init_scales)
+  b_hat, signs = init_b_hat(host_rng(key), n, shapes, spec, init_scales)
   zeros = lambda x: np.zeros((capacity,) + x.shape[1:], x.dtype)
-  spread = {g: jnp.asarray(_pad(v, capacity, zeros(v))) for g, v in spread.items()}
+  b_hat = {g: jnp.asarray(_pad(v, capacity, zeros(v))) for g, v in b_hat.items()}
   signs = {g: jnp.asarray(_pad(v, capacity, zeros(v))) for g, v in signs.items()}
   mask = jnp.asarray(np.arange(capacity) < n)
-  return Model(Params(params, spread), signs, mask, jnp.asarray(sh_degree, jnp.int32), spec)
+  return Model(Params(params, b_hat), signs, mask, jnp.asarray(sh_degree, jnp.int32), spec)
 
 
 def check_initial(points, capacity, init_opacity):

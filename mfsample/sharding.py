@@ -161,8 +161,10 @@ def reduce_sharded(fn, xs, *args, num_devices=1):
   `mesh_devices()` (args replicated); each device accumulates its elements one after
   another (`jax.lax.scan`: memory holds one element's result beside the running totals,
   whatever the batch), and the devices' totals are combined (`psum`, `pmax`) and
-  replicated on every device. The batch is padded to a multiple of `num_devices`; a padded
-  slot is skipped (`lax.cond`), so it costs nothing and adds nothing.
+  replicated on every device (a batch of one element on one device is `fn` of it, with no
+  loop around it: a data-parallel step with B = 1 is the plain step). The batch is padded
+  to a multiple of `num_devices`; a padded slot is skipped (`lax.cond`), so it costs nothing
+  and adds nothing.
 
   The sum is the same as a sequential one up to the order of the float additions: the
   devices' partial sums are added in the collective's order.
@@ -177,6 +179,8 @@ def reduce_sharded(fn, xs, *args, num_devices=1):
     (sums, maxes) with fn's structure and shapes.
   """
   b = jax.tree.leaves(xs)[0].shape[0]
+  if b == 1 and num_devices == 1:  # the sum and the max of one element: the element itself
+    return fn(jax.tree.map(lambda x: x[0], xs), *args)
   total = num_devices * math.ceil(b / num_devices)
   xs = _pad(xs, total)
   real = jnp.arange(total) < b

@@ -1,24 +1,58 @@
-"""Synthetic scenes for tests, benchmarks and notebooks."""
+"""Synthetic scenes for tests, benchmarks, notebooks and the docs' examples: no files needed.
 
-import jax.numpy as jnp
+* `random_gaussians`: random `Gaussians` (the renderer's tests and benchmarks).
+* `synthetic_views`: random ground-truth Gaussians seen from cameras around them, as `Views`
+  (what `mfsample.fit` trains on), and the Gaussians themselves.
+* `light_captures`: a diffuse shell of Gaussians captured under SH lights (what
+  `mfsample.lighting.fit_relightable` trains on).
+* `write_tiny_capture`: a tiny COLMAP capture and the 3DGS model that made it, as files.
+"""
+
 import numpy as np
 
+from mfsample import arg_checks
 from mfsample.camera import Camera
 from mfsample.data import synthetic
 from mfsample.data.synthetic import random_gaussians
 
-__all__ = ["orbit_camera", "random_gaussians", "write_tiny_capture"]
+__all__ = ["light_captures", "random_gaussians", "synthetic_views", "write_tiny_capture"]
 
 
-def orbit_camera(width, height, *, azimuth=0.3, elevation=0.4, distance=3.5, fov_x=0.9,
-                 target=(0.0, 0.0, 0.0)):
-  """A camera on a sphere around `target` (up = +z), looking at it."""
-  target = np.asarray(target, np.float64)
-  eye = target + distance * np.array([np.cos(elevation) * np.cos(azimuth),
-                                      np.cos(elevation) * np.sin(azimuth),
-                                      np.sin(elevation)])
-  return Camera.look_at(jnp.asarray(eye, jnp.float32), jnp.asarray(target, jnp.float32),
-                        jnp.array([0.0, 0.0, 1.0]), fov_x, width, height)
+def synthetic_views(num_views=12, *, size=32, num_gaussians=200, seed=0,
+                    background=(1.0, 1.0, 1.0), distance=3.0):
+  """Random ground-truth Gaussians in [-0.6, 0.6]^3 rendered by `mfsample.render` from
+  `num_views` cameras on a spiral around them (+z up, looking at the origin).
+
+  Returns:
+    (`Views` [num_views] of size x size images, with exact coverage and depth; the ground
+    truth `Gaussians`).
+  """
+  arg_checks.check_int("num_views", num_views, minimum=1)
+  arg_checks.check_int("size", size, minimum=1)
+  truth = synthetic.synthetic_gaussians(num_gaussians, seed)
+  cameras = synthetic.orbit_cameras(num_views, size, size, distance)
+  return synthetic.render_views(truth, cameras, background), truth
+
+
+def light_captures(cameras: Camera, lights, *, num_gaussians=150, seed=0, radius=0.5):
+  """Captures of a diffuse shell of random Gaussians (radius `radius`, about the origin) at
+  `cameras` under each of `lights`: linear radiance on black.
+
+  Args:
+    cameras: `Camera` [V].
+    lights: [L, n] SH lights (n = 4, 9 or 16).
+
+  Returns:
+    images [L, V, H, W, 3] float32.
+  """
+  from mfsample.lighting.captures import capture_many, synthetic_light_data
+
+  lights = np.asarray(lights, np.float64)
+  truth = synthetic.synthetic_scene(num_gaussians, seed, radius=radius)
+  bounds = (np.full(3, -radius - 0.2), np.full(3, radius + 0.2))
+  data = synthetic_light_data(truth, seed, cameras, cameras[:1], lights.shape[-1],
+                              bounds=bounds)
+  return capture_many(data.train_basis, lights)
 
 
 def write_tiny_capture(path, *, num_views=8, size=32, num_gaussians=200, seed=0):
@@ -47,3 +81,4 @@ def write_tiny_capture(path, *, num_views=8, size=32, num_gaussians=200, seed=0)
   export_colmap(root / "capture", views.replace(names=()), PointCloud(xyz, colors),
                 overwrite=True)
   return root / "capture", export_gaussians(root / "point_cloud.ply", gaussians)
+

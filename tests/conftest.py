@@ -99,7 +99,31 @@ def tiny_config(kind="lowrank", **overrides):
   return config
 
 
+def tiny_start(config, dataset):
+  """(the `Recipe` of a training config on `dataset`, its step-0 `Model`), as the training
+  job builds them: the scene's extent from the training cameras unless the config fixes it."""
+  from mfsample.train.config import recipe
+
+  extent = config.data.extent
+  if extent is None:
+    extent = data_lib.scene_extent(dataset.train.cameras)
+  plan = recipe(config, extent=extent)
+  return plan, plan.initial_model(seed=int(config.seed), bounds=dataset.bounds,
+                                  points=dataset.points)
+
+
+def train_with(config, dataset, **kwargs):
+  """`run_training` of a training config on `dataset` (what the training job trains)."""
+  from mfsample.train.loop import run_training
+
+  plan, model = tiny_start(config, dataset)
+  return run_training(model, dataset.train, plan.settings, seed=int(config.seed),
+                      extent=plan.extent, **kwargs)
+
+
 @pytest.fixture(scope="session")
 def tiny_dataset():
   """`Dataset` of random Gaussians seen by 12 training and 4 test cameras at 32 x 32."""
-  return data_lib.load_dataset(train_configs.get_config("tiny").data)
+  from mfsample.config_blocks import data_spec
+
+  return data_lib.load_dataset(data_spec(train_configs.get_config("tiny").data))

@@ -12,9 +12,13 @@ import jax.numpy as jnp
 import numpy as np
 
 from configs import camera_planning
-from mfsample.model import GROUPS, SamplerSpec, init_model
+from mfsample.config_blocks import data_spec
+from mfsample.groups import GROUPS
+from mfsample.jobs import Budgets
+from mfsample.model import init_model
 from mfsample.planning import poses, runner
 from mfsample.planning.pool import make_pool
+from mfsample.samplers import SamplerSpec
 
 BOUNDS = tuple((g, b) for g, b in zip(GROUPS, (1.0, 20.0, 2.0, 20.0, 0.5, 0.5), strict=True))
 
@@ -36,18 +40,18 @@ def tiny_run(workdir, strategies=("random", "farthest")):
 
 def tiny_pool():
   """The synthetic pool of the tiny config (8 candidates, 2 test views, 24 x 24)."""
-  return make_pool(tiny_config().data)
+  return make_pool(data_spec(tiny_config().data))
 
 
-def random_model(kind="lowrank", *, num=80, spread=0.05, seed=0, dtype=jnp.float32,
+def random_model(kind="lowrank", *, num=80, b_hat=0.05, seed=0, dtype=jnp.float32,
                  sh_degree=0, radius=0.5):
   """An untrained model: `num` Gaussians in [-radius, radius]^3 with B_hat entries of size
-  ~`spread` (so that U > 0 without training)."""
+  ~`b_hat` (so that U > 0 without training)."""
   rng = np.random.default_rng(seed)
   points = rng.uniform(-radius, radius, (num, 3))
   spec = SamplerSpec(kind=kind, rank=2, groups=GROUPS if kind != "deterministic" else (),
                      bounds=BOUNDS)
-  scales = {g: spread for g in GROUPS}
+  scales = {g: b_hat for g in GROUPS}
   model = init_model(jax.random.PRNGKey(seed), points, spec=spec, sh_degree=sh_degree,
                      init_scales=scales, init_opacity=0.6,
                      colors=rng.uniform(0.1, 0.9, (num, 3)))
@@ -64,8 +68,9 @@ def trained_one_view(kind="lowrank", view=0):
   pool = tiny_pool()
   trainer = runner.Trainer(config, pool)
   sel = [runner.candidate_view(pool, view)]
-  return trainer.round_state("deterministic" if kind == "deterministic" else "stochastic",
-                             sel, 0)
+  trained, _ = trainer.round_state("deterministic" if kind == "deterministic" else "stochastic",
+                                   sel, 0, Budgets())
+  return trained
 
 
 def opposite_uv(uv):

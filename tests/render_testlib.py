@@ -10,10 +10,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from mfsample import Gaussians, RenderSettings, render
+from mfsample import Gaussians, RenderSettings, orbit_camera, render
 from mfsample._pytree import replace
 from mfsample.renderer.reference import render_reference
-from mfsample.testing import orbit_camera, random_gaussians
+from mfsample.testing import random_gaussians
 
 # Small chunks and steps so that one tile's list spans many chunks and several loop steps.
 SMALL = RenderSettings(max_intersections=4096, chunk_size=8, chunks_per_step=4)
@@ -52,7 +52,7 @@ def hard_scene(sh_degree, seed=0, num_random=60):
 
 
 def hard_camera():
-  return orbit_camera(WIDTH, HEIGHT, azimuth=0.7, elevation=0.3, distance=2.6, fov_x=1.1)
+  return orbit_camera(0.7, 0.3, width=WIDTH, height=HEIGHT, distance=2.6, fov_x=1.1)
 
 
 BACKGROUND = jnp.array([0.2, 0.5, 0.9])
@@ -96,7 +96,7 @@ def extreme_batch():
   """Same-shape scenes, each with one extreme property, stacked for one vmapped compile."""
   n = 8
   base = random_gaussians(n, sh_degree=1, seed=4, scale_range=(0.05, 0.2))
-  cam = orbit_camera(16, 12, distance=3.0)
+  cam = orbit_camera(0.3, 0.4, width=16, height=12, distance=3.0)
   center = jnp.asarray(cam.center, jnp.float32)
   on_camera_plane = center + 1.0 * cam.rotation[0]  # z = 0 in camera space
   cases = {

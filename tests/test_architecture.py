@@ -1,8 +1,11 @@
-"""docs/architecture.md stays true: every module listed, each layer importing only upwards."""
+"""docs/architecture.md stays true: every module listed, each layer importing only upwards,
+configs read by the jobs alone."""
 
 import ast
 import pathlib
 import re
+import subprocess
+import sys
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 PACKAGE = ROOT / "mfsample"
@@ -81,3 +84,28 @@ def test_layers_import_only_downwards():
       if other not in (None, "-") and LAYERS.index(other) > LAYERS.index(layer):
         wrong.append(f"{module} ({layer}) imports {target.relative_to(ROOT)} ({other})")
   assert not wrong, "\n".join(wrong)
+
+
+def test_nothing_below_the_jobs_reads_a_config():
+  """Config at the edge: only the jobs layer and above import ml_collections."""
+  table = _table()
+  below = {m for m, layer in table.items() if layer not in ("-", "jobs", "apps")}
+  wrong = []
+  for module in sorted(below):
+    for node in ast.walk(ast.parse((ROOT / module).read_text())):
+      names = [a.name for a in node.names] if isinstance(node, ast.Import) else (
+          [node.module] if isinstance(node, ast.ImportFrom) and node.module else [])
+      if any(n == "ml_collections" or n.startswith("ml_collections.") for n in names):
+        wrong.append(f"{module} ({table[module]})")
+  assert not wrong, "below the jobs layer, these import ml_collections: " + ", ".join(wrong)
+
+
+def test_the_library_imports_no_job():
+  """`import mfsample` (the functional API) loads neither ml_collections nor a job module."""
+  code = ("import sys, mfsample, mfsample.train, mfsample.lighting, mfsample.data, "
+          "mfsample.planning; bad = sorted(m for m in sys.modules if m.startswith("
+          "'ml_collections') or m in ('mfsample.jobs', 'mfsample.config_blocks')); "
+          "print(bad); sys.exit(1 if bad else 0)")
+  out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                       cwd=ROOT, timeout=300, check=False)
+  assert out.returncode == 0, out.stdout + out.stderr

@@ -75,7 +75,7 @@ def test_missing_lego_names_the_flag_and_where_to_get_it(tmp_path):
 def test_train_step_falls_back_to_a_synthetic_scene_of_the_same_size(tmp_path):
   config, scene = train_step.base_config(str(tmp_path), 48, 500, 2)
   assert scene == "synthetic" and config.data.kind == "synthetic"
-  assert (config.data.synthetic.width, config.data.synthetic.height) == (48, 48)
+  assert (config.data.width, config.data.height) == (48, 48)
   assert config.model.init_points == 500 and config.sampler.num_samples == 2
   with pytest.raises(ValueError, match="rank"):
     train_step.variant_config(config, "rankx")
@@ -111,7 +111,7 @@ def test_train_step_rounds_interleave_and_ratios_are_within_rounds():
   # B_hat of rank k adds k floats per mean float: rank 2 trains 3x the deterministic's.
   assert rank2["params_per_gaussian"] == 3 * det["params_per_gaussian"]
   assert rounds[0]["rank2"]["live"] == base.model.init_points
-  assert rounds[0]["rank2"]["resolution"] == base.data.synthetic.height
+  assert rounds[0]["rank2"]["resolution"] == base.data.height
 
 
 @pytest.mark.slow
@@ -276,11 +276,12 @@ def test_scaling_ratios_are_taken_within_rounds():
 
 @pytest.mark.slow
 def test_scaling_measures_scoring_and_a_training_step_per_device_count():
-  config, dataset, setup, state = scaling.setup_run(batch_size=2, resolution=16, points=64)
+  views, setup, state = scaling.setup_run(batch_size=2, resolution=16, points=64)
   assert setup.step_config.batch_size == 2 and state.model.num_live == 64
+  assert len(views) == 12 and views.images.shape[1:3] == (16, 16)
   score, budget = scaling.scoring([1], state.model, resolution=16, num_candidates=2,
                                   samples=2, rounds=2)
   assert budget >= 512 and score[1]["speedup"] == 1.0 and len(score[1]["wall_rounds"]) == 2
   assert score[1]["per_second"] > 0 and score[1]["cpu_seconds"] > 0
-  train, _ = scaling.training([1], config, dataset, setup, state, rounds=2)
+  train, _ = scaling.training([1], views, setup, state, rounds=2)
   assert train[1]["per_second"] > 0 and len(train[1]["cpu_rounds"]) == 2

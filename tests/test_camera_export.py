@@ -10,7 +10,7 @@ import pytest
 from mfsample.camera import Camera
 from mfsample.data import load_nerfstudio
 from mfsample.data.camera_export import camera_path, cameras_from_poses, export_cameras
-from mfsample.next_views.export import export_planned_views
+from mfsample.your_data.export import export_planned_views
 
 
 def _cameras(num=3, width=40, height=30, seed=0):

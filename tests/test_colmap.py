@@ -6,7 +6,7 @@ import imageio.v3 as iio
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from conftest import tiny_config
+from conftest import tiny_config, tiny_start
 
 from mfsample.camera import Camera
 from mfsample.data import DatasetError, PointCloud, export_colmap, load_colmap
@@ -219,8 +219,8 @@ def test_errors_name_what_is_missing(tmp_path, capture):
 def test_training_data_and_sfm_initialisation(capture):
   """data.kind = "colmap": every 2nd image held out, the points' box, and a model that starts
   at the SfM points with their colours (the 3DGS initialisation)."""
+  from mfsample.config_blocks import data_spec
   from mfsample.data import datasets as data_lib
-  from mfsample.train import init_state, make_setup
 
   root, *_ = capture
   config = tiny_config()
@@ -228,22 +228,21 @@ def test_training_data_and_sfm_initialisation(capture):
   config.data.path = str(root)
   config.data.holdout_every = 2
   config.model.init_from = "points"
-  ds = data_lib.load_dataset(config.data)
+  ds = data_lib.load_dataset(data_spec(config.data))
   assert [n[:5] for n in ds.test.names] == ["00000", "00002"] and len(ds.train) == 2
   np.testing.assert_allclose(ds.bounds[0], [-0.4, -0.25, 0.0], atol=1e-6)
-  state = init_state(config, make_setup(config, ds.train), ds.bounds, ds.points)
-  model = state.model
+  _, model = tiny_start(config, ds)
   assert model.num_live == 6
   np.testing.assert_array_equal(np.asarray(model.params.mean["means"])[:6], ds.points.xyz)
   np.testing.assert_allclose(np.asarray(model.params.mean["sh_dc"])[:6],
                              np.asarray(rgb_to_sh_dc(COLOURS)), atol=1e-5)
-  config.data.kind = "synthetic"
   with pytest.raises(ValueError, match="init_from = 'points' needs a dataset"):
-    init_state(config, make_setup(config, ds.train), ds.bounds, None)
+    tiny_start(config, ds._replace(points=None))
 
 
 def test_planning_pool_of_a_capture(capture):
   from configs import camera_planning
+  from mfsample.config_blocks import data_spec
   from mfsample.planning.pool import make_pool
 
   root, *_ = capture
@@ -252,6 +251,6 @@ def test_planning_pool_of_a_capture(capture):
   config.data.path = str(root)
   config.data.downscale = 1
   config.data.holdout_every = 2
-  pool = make_pool(config.data)
+  pool = make_pool(data_spec(config.data))
   assert len(pool.candidates) == 2 and len(pool.test) == 2 and pool.oracle is None
   assert len(pool.points) == 6 and pool.sphere.width == 64

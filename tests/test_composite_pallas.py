@@ -29,10 +29,10 @@ from render_testlib import (
   render_and_grads,
 )
 
-from mfsample import RenderSettings, render
+from mfsample import RenderSettings, orbit_camera, render
 from mfsample._pytree import replace
 from mfsample.renderer.composite_pallas import KernelParams, _forward, tile_ranges
-from mfsample.testing import orbit_camera, random_gaussians
+from mfsample.testing import random_gaussians
 
 IMAGE_ATOL = 1e-5
 GRAD_RTOL = 1e-4
@@ -105,7 +105,7 @@ def test_matches_jnp_under_vmap_over_cameras():
   """The kernel vmapped over two cameras against the jnp compositor camera by camera (vmap
   over samples of the Gaussians: the extremes above)."""
   gaussians, cam = hard_scene(3)
-  other = orbit_camera(WIDTH, HEIGHT, azimuth=2.0, elevation=0.5, distance=2.8, fov_x=1.1)
+  other = orbit_camera(2.0, 0.5, width=WIDTH, height=HEIGHT, distance=2.8, fov_x=1.1)
   cams = jax.tree.map(lambda *x: jnp.stack(x), cam, other)
   weights = loss_weights()
   got, (grads_gaussians, grads_cams) = _render_and_grads_over_cameras(
@@ -141,8 +141,9 @@ def test_kernel_lowers_for_cuda_on_a_cpu():
   """
   settings = pallas(SMALL)
   g = random_gaussians(12, sh_degree=1, seed=1, scale_range=(0.1, 0.3))
-  cams = jax.tree.map(lambda *x: jnp.stack(x), orbit_camera(16, 16, azimuth=0.1),
-                      orbit_camera(16, 16, azimuth=0.9))
+  cams = jax.tree.map(lambda *x: jnp.stack(x), orbit_camera(0.1, 0.4, width=16, height=16,
+                                                            distance=3.5),
+                      orbit_camera(0.9, 0.4, width=16, height=16, distance=3.5))
 
   def loss(g, cam):
     return jnp.sum(render(g, cam, settings=settings).rgb)
@@ -163,7 +164,7 @@ def test_kernel_lowers_for_cuda_on_a_cpu():
 def test_warps_setting_reaches_both_kernels():
   """`pallas_warps` is the Triton launch's warp count (0: one per 32 pixels of a tile)."""
   g = random_gaussians(12, sh_degree=1, seed=1, scale_range=(0.1, 0.3))
-  cam = orbit_camera(16, 16, azimuth=0.1)
+  cam = orbit_camera(0.1, 0.4, width=16, height=16, distance=3.5)
   triton = "__gpu$xla.gpu.triton"
   for warps, launched in ((0, 8), (2, 2)):
     settings = pallas(SMALL).replace(pallas_warps=warps)

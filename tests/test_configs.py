@@ -47,7 +47,7 @@ def test_planning_variants_load_and_name_real_strategies(variant):
   assert max(config.eval_views) <= config.max_views
   # The rounds' training length is one field, whatever the variant.
   assert config.round_train.train.num_steps == config.rounds.steps
-  assert runner.round_config(config, "lowrank").train.num_steps == config.rounds.steps
+  assert runner.round_recipe(config, "lowrank").settings.num_steps == config.rounds.steps
 
 
 def test_unknown_variants_are_refused_by_name():
@@ -78,14 +78,14 @@ def test_uncertainty_quality_variants_load_and_override(variant):
 def test_ablation_overrides_change_the_round_model_of_ours_sel():
   # docs/uncertainty_quality.md runs the paper's Table 4 as override lines of the planning
   # config: Ours (Sel.) trains its round models with `round_train.sampler`.
-  assert make_strategy("ours_sel", camera_planning.get_config()).model_kind == "stochastic"
+  assert make_strategy("ours_sel").model_kind == "stochastic"
   for kind, rank in (("diagonal", 2), ("block", 2), ("lowrank", 10), ("deterministic", 2)):
     config = _load("camera_planning.py", "--config.strategies=('ours_sel',)",
                    f"--config.round_train.sampler.kind={kind}",
                    f"--config.round_train.sampler.rank={rank}")
-    cfg = runner.round_config(config, "stochastic")
-    assert (cfg.sampler.kind, cfg.sampler.rank) == (kind, rank)
-    assert cfg.train.num_steps == config.rounds.steps
+    plan = runner.round_recipe(config, "stochastic")
+    assert (plan.spec.kind, plan.spec.rank) == (kind, rank)
+    assert plan.settings.num_steps == config.rounds.steps
 
 
 def _documented_configs():

@@ -1,11 +1,16 @@
-"""Tests of mfsample.data.datasets: the dataset dispatch on config.data.kind."""
+"""Tests of mfsample.data.datasets: one registry of data kinds, typed `DataSpec`s, and what each
+kind offers (views, points, ground truth at any camera, images under any light)."""
 
+import jax.numpy as jnp
 import numpy as np
 import pytest
-from conftest import tiny_config
 
+from mfsample.camera import Camera
 from mfsample.data import datasets as data_lib
 from mfsample.data import resolve_path
+from mfsample.data.datasets import DataSpec, SyntheticSpec
+
+SHELL = SyntheticSpec(shape="shell", num_gaussians=60, radius=0.5, cameras="band")
 
 
 def test_synthetic_dataset(tiny_dataset):
@@ -13,15 +18,64 @@ def test_synthetic_dataset(tiny_dataset):
   assert ds.train.images.shape == (12, 32, 32, 3) and len(ds.test) == 4
   assert float(np.min(ds.train.images)) >= 0.0 and float(np.max(ds.train.images)) <= 1.0
   assert float(np.mean(ds.train.alphas)) > 0.05  # the Gaussians are in view
-  np.testing.assert_allclose(ds.bounds[0], -0.8)
+  np.testing.assert_allclose(ds.bounds[0], -0.8)  # radius 0.6 + 0.2
+  assert ds.name == "synthetic" and ds.oracle is not None and ds.sphere is not None
+
+
+def test_every_kind_declares_what_it_offers():
+  offers = {name: kind.offers for name, kind in data_lib.DATA_KINDS.items()}
+  assert offers["scene"] == offers["synthetic"] == ("depth", "masks", "oracle", "lights")
+  assert offers["colmap"] == offers["nerfstudio"] == ("points",)
+  assert offers["blender"] == offers["llff"] == ()
+  assert data_lib.kinds_offering("lights") == ("synthetic", "scene")
+  assert set(data_lib.FILE_KINDS) == {"blender", "colmap", "llff", "nerfstudio"}
+  assert DataSpec(kind="colmap").offers == ("points",)
+
+
+def test_the_oracle_gives_the_ground_truth_of_any_pose():
+  """A synthetic "band" dataset: its views are the oracle's images at their cameras, and a new
+  pose on the same sphere gets its own image (the optimising planning strategies)."""
+  spec = DataSpec(kind="synthetic", width=16, height=16, num_train=3, num_test=1,
+                  background=(0.0, 0.0, 0.0), synthetic=SHELL)
+  ds = data_lib.load_dataset(spec)
+  np.testing.assert_allclose(ds.oracle(ds.train.cameras[1]), ds.train.images[1], atol=1e-6)
+  views, box = data_lib.capture_views(spec, ds.test.cameras)
+  np.testing.assert_allclose(views.images, ds.test.images, atol=1e-6)
+  assert views.depths is not None and views.alphas is not None
+  np.testing.assert_allclose(box[1], 0.7)
+  assert (ds.sphere.radius, ds.sphere.v_range) == (3.0, (0.1, 0.6))
+
+
+def test_lights_come_from_the_kinds_that_offer_them():
+  spec = DataSpec(kind="synthetic", width=12, height=12, num_train=2, num_test=1,
+                  synthetic=SHELL)
+  data = data_lib.load_light_data(spec, 4)
+  assert data.train_basis.shape == (2, 4, 12, 12, 3) and data.test_basis.shape[0] == 1
+  with pytest.raises(ValueError, match="'colmap' has no images under new lights"):
+    data_lib.load_light_data(DataSpec(kind="colmap"), 4)
+  with pytest.raises(ValueError, match="'blender' has no ground truth at new cameras"):
+    data_lib.capture_views(DataSpec(kind="blender"), None)
+
+
+def test_specs_check_their_fields_by_name():
+  with pytest.raises(ValueError, match="DataSpec.kind must be one of"):
+    DataSpec(kind="nerf")
+  with pytest.raises(ValueError, match=r"DataSpec.holdout_every must be an integer >= 2"):
+    DataSpec(holdout_every=1)
+  with pytest.raises(ValueError, match=r"DataSpec.background must be 3 finite numbers"):
+    DataSpec(background=(1.0, 2.0, 0.0))
+  with pytest.raises(ValueError, match="SyntheticSpec.shape must be one of"):
+    SyntheticSpec(shape="cube")
+  with pytest.raises(ValueError, match="SyntheticSpec.distance must be a finite number > 0.6"):
+    SyntheticSpec(distance=0.5)
+  with pytest.raises(ValueError, match="spec must be a DataSpec"):
+    data_lib.load_dataset({"kind": "synthetic"})
 
 
 def test_blender_without_data_fails_clearly(tmp_path):
-  config = tiny_config()
-  config.data.kind = "blender"
-  config.data.path = str(tmp_path / "no_such_scene")
+  spec = DataSpec(kind="blender", path=str(tmp_path / "no_such_scene"))
   with pytest.raises(FileNotFoundError, match="transforms_train.json"):
-    data_lib.load_dataset(config.data)
+    data_lib.load_dataset(spec)
 
 
 def test_relative_paths_resolve_against_the_working_directory(tmp_path, monkeypatch):
@@ -30,31 +84,21 @@ def test_relative_paths_resolve_against_the_working_directory(tmp_path, monkeypa
   assert str(resolve_path("/abs/path")) == "/abs/path"
 
 
-def test_unknown_kind_is_an_error():
-  config = tiny_config()
-  config.data.kind = "nerf"
-  with pytest.raises(ValueError, match="config.data.kind"):
-    data_lib.load_dataset(config.data)
-
-
 def test_scene_kind_captures_with_the_scene_api(tmp_path):
   scenes = pytest.importorskip("mfsample.scenes")
   if not scenes.mitsuba_available():
     pytest.skip("Mitsuba (optional extra 'scenes') is not installed")
-  config = tiny_config()
-  config.data.kind = "scene"
-  config.data.update(width=16, height=16, num_train=2, num_test=1, spp=4,
-                     cache_dir=str(tmp_path))
-  ds = data_lib.load_dataset(config.data)
+  spec = DataSpec(kind="scene", width=16, height=16, num_train=2, num_test=1, spp=4,
+                  cache_dir=str(tmp_path))
+  ds = data_lib.load_dataset(spec)
   assert ds.train.images.shape == (2, 16, 16, 3) and len(ds.test) == 1
-  scene = scenes.get_scene(config.data.scene)
+  scene = scenes.get_scene(spec.scene)
   np.testing.assert_allclose(ds.bounds[1], np.asarray(scene.center) + scene.radius)
+  assert ds.name == scene.name and ds.sphere.radius == scene.camera_distance
+  np.testing.assert_allclose(ds.oracle(ds.train.cameras[0]), ds.train.images[0], atol=1e-6)
 
 
 def test_scene_extent_follows_3dgs():
-  import jax.numpy as jnp
-
-  from mfsample.camera import Camera
   eyes = jnp.array([[2.0, 0, 0], [-2.0, 0, 0]])
   cams = Camera.look_at(eyes, jnp.zeros((2, 3)), jnp.array([0.0, 0, 1]), 0.8, 8, 8)
   assert data_lib.scene_extent(cams) == pytest.approx(2.2)
@@ -63,9 +107,7 @@ def test_scene_extent_follows_3dgs():
 
 def test_llff_kind_holds_out_every_nth_view_and_boxes_the_frusta(tmp_path):
   import imageio.v3 as iio
-  import jax.numpy as jnp
 
-  from mfsample.camera import Camera
   from mfsample.data import poses_bounds_from_cameras
 
   eyes = np.stack([np.linspace(-1.0, 1.0, 9), np.zeros(9), np.full(9, -4.0)], -1)
@@ -76,13 +118,10 @@ def test_llff_kind_holds_out_every_nth_view_and_boxes_the_frusta(tmp_path):
   (tmp_path / "images_8").mkdir()
   for v in range(9):
     iio.imwrite(tmp_path / "images_8" / f"IMG_{v}.png", np.zeros((6, 8, 3), np.uint8))
-  config = tiny_config()
-  config.data.kind = "llff"
-  config.data.path = str(tmp_path)
-  config.data.downscale = 8
-  ds = data_lib.load_dataset(config.data)
+  ds = data_lib.load_dataset(DataSpec(kind="llff", path=str(tmp_path), downscale=8))
   assert ds.test.names == ("IMG_0", "IMG_8") and len(ds.train) == 7 and ds.points is None
   assert np.all(ds.bounds[0] < [-1.0, -0.5, -3.0]) and np.all(ds.bounds[1] > [1.0, 0.5, 1.9])
+  assert ds.oracle is None and ds.name == tmp_path.name
 
   one = Camera.create(np.eye(4, dtype=np.float32)[None], 10.0, 10.0, 5.0, 5.0, 10, 10)
   low, high = data_lib.frustum_box(one, np.array([[1.0, 2.0]]))

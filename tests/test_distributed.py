@@ -18,11 +18,11 @@ import time
 import jax
 import numpy as np
 import pytest
-from conftest import tiny_config
+from conftest import tiny_config, tiny_start, train_with
 
-from mfsample import distributed
-from mfsample import uncertainty as unc
-from mfsample.data import datasets as data_lib
+from mfsample import config_blocks, distributed
+from mfsample import view_uncertainty as unc
+from mfsample.samplers import sample_z
 from mfsample.train import checkpoint as ckpt
 from mfsample.train import loop
 
@@ -101,10 +101,10 @@ def reference(tiny_dataset, tmp_path_factory):
   3 steps of it as checkpoints in the workdir the two processes will resume."""
   config = _config()
   root = tmp_path_factory.mktemp("distributed")
-  straight = loop.train(config, tiny_dataset.train, bounds=tiny_dataset.bounds)
+  straight = train_with(config, tiny_dataset)
   resumed = str(root / "two_processes")
-  loop.train(config, tiny_dataset.train, bounds=tiny_dataset.bounds,
-             checkpoint_dir=os.path.join(resumed, "checkpoints"), stop_at=3)
+  train_with(config, tiny_dataset, checkpoint_dir=os.path.join(resumed, "checkpoints"),
+             checkpoint_every=config.train.checkpoint_every, stop_at=3)
   return config, straight, resumed
 
 
@@ -123,7 +123,8 @@ def _assert_states_close(a, b):
 _CONFIG = textwrap.dedent("""
     import json, sys
     sys.path.insert(0, "tests")
-    from conftest import tiny_config
+    from conftest import tiny_config, train_with
+    from mfsample.config_blocks import data_spec, render_settings
     config = tiny_config("lowrank", **json.loads(sys.argv[1]))
 """)
 
@@ -132,8 +133,8 @@ _FOUR_DEVICES = _CONFIG + textwrap.dedent("""
     assert jax.device_count() == 4, jax.devices()
     from mfsample.data import datasets as data_lib
     from mfsample.train import loop
-    dataset = data_lib.load_dataset(config.data)
-    result = loop.train(config, dataset.train, bounds=dataset.bounds)
+    dataset = data_lib.load_dataset(data_spec(config.data))
+    result = train_with(config, dataset)
     assert result.setup.step_config.num_devices == 4
     np.savez(sys.argv[2], *[np.asarray(x) for x in jax.tree.leaves(result.state)])
 """)
@@ -159,16 +160,16 @@ _TWO_PROCESSES = _CONFIG + textwrap.dedent("""
     assert distributed.initialize_from_environment()
     import jax, numpy as np
     assert jax.process_count() == 2 and jax.device_count() == 4, jax.devices()
-    from mfsample import uncertainty as unc
+    from mfsample import view_uncertainty as unc
     from mfsample.data import datasets as data_lib
-    from mfsample.train.config import render_settings
+    from mfsample.samplers import sample_z
     from mfsample.train.experiment import JOB
     state = JOB.run(config, sys.argv[2])  # resumes the workdir's checkpoint at step 3
     # Candidate scoring: U of every camera of the dataset, split over the 4 devices.
-    dataset = data_lib.load_dataset(config.data)
+    dataset = data_lib.load_dataset(data_spec(config.data))
     cameras = jax.tree.map(lambda a, b: np.concatenate([a, b]), dataset.train.cameras,
                            dataset.test.cameras)
-    z = unc.uncertainty_z(state.model, 2)
+    z = sample_z(state.model, 2)
     scores, _ = unc.score_cameras(state.model, cameras, z,
                                   settings=render_settings(config.render))
     digest = hashlib.sha256(b"".join(np.asarray(x).tobytes()
@@ -195,10 +196,11 @@ def test_two_processes_resume_train_and_score_as_one(reference, tiny_dataset):
   assert first["scores"] == second["scores"]
 
   # The model: the final checkpoint (written by process 0) against the straight run.
-  setup = loop.make_setup(config, tiny_dataset.train)
-  restored = loop.restore_latest(
-      os.path.join(workdir, "checkpoints"), setup,
-      lambda: loop.init_state(config, setup, tiny_dataset.bounds))
+  plan, model = tiny_start(config, tiny_dataset)
+  setup = loop.make_setup(plan.settings, model, seed=int(config.seed), extent=plan.extent,
+                          num_views=len(tiny_dataset.train))
+  restored = loop.restore_latest(os.path.join(workdir, "checkpoints"), setup,
+                                 lambda: loop.init_state(model, setup))
   state, _, meta = restored
   assert meta["step"] == 6
   _assert_states_close(state, straight.state)
@@ -207,12 +209,13 @@ def test_two_processes_resume_train_and_score_as_one(reference, tiny_dataset):
   assert metrics["steps"] == 6 and metrics["live_gaussians"] == straight.state.model.num_live
 
   # Scoring: the same model scored here on one device.
-  dataset = data_lib.load_dataset(config.data)
+  dataset = tiny_dataset
   cameras = jax.tree.map(lambda a, b: np.concatenate([a, b]), dataset.train.cameras,
                          dataset.test.cameras)
-  z = unc.uncertainty_z(state.model, 2)
+  z = sample_z(state.model, 2)
   here, _ = unc.score_cameras(state.model, cameras, z,
-                              settings=loop.render_settings(config.render), num_devices=1)
+                              settings=config_blocks.render_settings(config.render),
+                              num_devices=1)
   np.testing.assert_allclose(first["scores"], np.asarray(here.values), rtol=1e-5)
   # Only process 0 wrote: one set of results, no stray temporaries, the lock released.
   assert sorted(os.listdir(workdir)) == sorted(

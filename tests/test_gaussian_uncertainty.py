@@ -9,7 +9,7 @@ import pytest
 from planning_testlib import BOUNDS
 
 from mfsample import RenderSettings, render
-from mfsample import uncertainty as unc
+from mfsample import view_uncertainty as unc
 from mfsample.camera import Camera
 from mfsample.gaussian_uncertainty import (
   GaussianUncertainty,
@@ -17,8 +17,9 @@ from mfsample.gaussian_uncertainty import (
   spreads,
   view_share,
 )
-from mfsample.model import GROUPS, SamplerSpec, init_model, mean_gaussians
-from mfsample.samplers import sample
+from mfsample.groups import GROUPS
+from mfsample.model import init_model, mean_gaussians, sample
+from mfsample.samplers import SamplerSpec, sample_z
 
 SETTINGS = RenderSettings(max_intersections=1 << 10)
 SIZE = 16
@@ -47,7 +48,7 @@ def model():
 
 @pytest.fixture(scope="module")
 def z(model):
-  return unc.uncertainty_z(model, 4)
+  return sample_z(model, 4)
 
 
 WHITE = jnp.array([1.0, 1.0, 1.0])
@@ -119,7 +120,7 @@ def test_deterministic_groups_and_models_have_zero_spread_and_share():
   position_std, colour_std = spreads(small_model(groups=("sh_dc",)))
   assert np.all(np.asarray(position_std) == 0.0) and float(colour_std.max()) > 0.0
   det = small_model("deterministic")
-  out = gaussian_uncertainty(det, cameras(2), unc.uncertainty_z(det, 2), settings=SETTINGS)
+  out = gaussian_uncertainty(det, cameras(2), sample_z(det, 2), settings=SETTINGS)
   assert all(np.all(np.asarray(f) == 0.0) for f in out)
 
 

@@ -18,15 +18,15 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 from absl import flags
-from conftest import tiny_config
+from conftest import tiny_config, train_with
 from ml_collections import config_flags
 from PIL import Image
 from planning_testlib import random_model
 from test_train import resume_config
 
 from configs import camera_planning
-from mfsample import _json, config_checks, jobs, metrics, samplers
-from mfsample import uncertainty as unc
+from mfsample import _json, config_checks, jobs, metrics, orbit_camera, samplers
+from mfsample import view_uncertainty as unc
 from mfsample._pytree import replace
 from mfsample.camera import Camera, InvalidCameraError
 from mfsample.config_checks import ConfigError
@@ -43,32 +43,36 @@ from mfsample.data import (
   poses_bounds_from_cameras,
 )
 from mfsample.data._io import read_image, read_json
+from mfsample.groups import GROUPS
 from mfsample.lighting import captures, lights
 from mfsample.lighting import field as light_field
 from mfsample.lighting import optimize as light_optimize
 from mfsample.lighting import uncertainty as lu
 from mfsample.lighting.field import init_relightable
-from mfsample.model import GROUPS, SamplerSpec, init_model, model_from_mean
-from mfsample.next_views import sphere_candidates, top_k
+from mfsample.model import init_model, model_from_mean, sample
 from mfsample.planning import optimize as view_optimize
 from mfsample.planning import poses, runner, tables
 from mfsample.planning.config import validate as validate_planning
 from mfsample.renderer import RenderSettings, render
 from mfsample.renderer.budget import render_with_budget
+from mfsample.samplers import SamplerSpec, sample_z
 from mfsample.scenes import cache
-from mfsample.testing import orbit_camera, random_gaussians
+from mfsample.selection import top_k
+from mfsample.testing import random_gaussians
 from mfsample.train import checkpoint as ckpt
-from mfsample.train import experiment, loop
+from mfsample.train import experiment
 from mfsample.train.config import validate as validate_training
 from mfsample.train.experiment import train_and_evaluate
 from mfsample.workdir import WorkdirError
+from mfsample.your_data import sphere_candidates
 
 NAN = float("nan")
 
 
 def _pose():
   """A valid [4, 4] world-to-camera (numpy float64)."""
-  return np.asarray(orbit_camera(16, 16, distance=3.0).world_to_camera, np.float64)
+  return np.asarray(orbit_camera(0.3, 0.4, width=16, height=16, distance=3.0).world_to_camera,
+                    np.float64)
 
 
 def _rot_x(deg):
@@ -214,16 +218,16 @@ def test_render_gives_nan_images_for_invalid_cameras():
     (lambda g, c: render(g, c, screen_offset=jnp.zeros((4, 3))), ValueError,
      r"screen_offset must have shape \[N=4, 2\], got \[4, 3\]"),
     (lambda g, c: RenderSettings(radius_sigma=NAN), ValueError,
-     "RenderSettings.radius_sigma must be a finite number, got nan"),
+     "RenderSettings.radius_sigma must be a finite number > 0.0, got nan"),
     (lambda g, c: RenderSettings(tile_size=2.5), ValueError,
-     "RenderSettings.tile_size must be an integer, got 2.5"),
+     "RenderSettings.tile_size must be an integer >= 1, got 2.5"),
     (lambda g, c: render_with_budget(render, SMALL, g, c, max_budget=0), ValueError,
      "max_budget must be an integer >= 1, got 0"),
 ])
 def test_render_input_table(call, error, message):
   g = random_gaussians(4, sh_degree=0, seed=0)
   with pytest.raises(error, match=message):
-    call(g, orbit_camera(16, 16))
+    call(g, orbit_camera(0.3, 0.4, width=16, height=16, distance=3.5))
 
 
 # ====================================================================== init_model
@@ -291,20 +295,20 @@ def test_model_from_a_mean_with_a_non_finite_row_is_refused():
 
 
 @pytest.mark.parametrize("kwargs, message", [
-    ({"kind": "gaussian"}, "sampler kind must be one of"),
+    ({"kind": "gaussian"}, "SamplerSpec.kind must be one of"),
     ({"kind": "lowrank", "rank": 0}, "rank must be an integer >= 1"),
-    ({"groups": ("means", "colour")}, "unknown stochastic groups"),
-    ({"groups": ("means",), "bounds": ()}, "no bound given"),
+    ({"groups": ("means", "colour")}, r"SamplerSpec.groups must be .* \('colour' is not one\)"),
+    ({"groups": ("means",), "bounds": ()}, "no bound given for"),
     # A bound of NaN, -1 or 0 would clamp B_hat to NaN or 0 after the first training step.
     ({"groups": ("means",), "bounds": (("means", NAN),)},
-     r"SamplerSpec.bounds\['means'\] must be a finite number > 0 .*, got nan"),
+     r"SamplerSpec.bounds\['means'\] must be a finite number > 0.0, got nan"),
     ({"groups": ("means",), "bounds": (("means", -1.0),)}, r"bounds\['means'\] .*got -1.0"),
     ({"groups": ("means",), "bounds": (("means", 0),)}, r"bounds\['means'\] .*got 0"),
     ({"groups": ("means",), "bounds": (("means", True),)}, r"bounds\['means'\] .*got True"),
-    ({"rank": 2.5}, "SamplerSpec.rank must be an integer >= 1 .*, got 2.5"),
+    ({"rank": 2.5}, "SamplerSpec.rank must be an integer >= 1, got 2.5"),
     ({"kind": "diagonal", "rank": 0}, "SamplerSpec.rank must be an integer >= 1"),
-    ({"groups": ("means", "means"), "bounds": (("means", 1.0),)}, "repeats a group"),
-    ({"groups": ("means",), "bounds": (("means", 1.0), ("means", 2.0))}, "two bounds for"),
+    ({"groups": ("means", "means"), "bounds": (("means", 1.0),)}, "'means' repeats"),
+    ({"groups": ("means",), "bounds": (("means", 1.0), ("means", 2.0))}, "two for 'means'"),
     ({"groups": ("means",), "bounds": (("colour", 1.0),)}, "names an unknown group 'colour'"),
     ({"groups": ["means"], "bounds": (("means", 1.0),)}, "SamplerSpec.groups must be a tuple"),
     ({"groups": ("means",), "bounds": {"means": 1.0}}, "SamplerSpec.bounds must be a tuple"),
@@ -322,17 +326,16 @@ def test_sampler_spec_table(kwargs, message):
     (lambda m: samplers.sobol_z(4, 2.5, 0), "dim must be an integer"),
     (lambda m: samplers.sobol_z(4, 30_000, 0), "exceeds the 21201 dimensions"),
     (lambda m: samplers.sobol_z(4, 2, 0, offset=-3), "offset must be an integer >= 0"),
-    (lambda m: samplers.draw_z(m, -1, jax.random.PRNGKey(0)), "num must be an integer >= 0"),
-    (lambda m: samplers.sample(m, jnp.zeros(3)), r"z must have shape \(2,\)"),
-    (lambda m: unc.uncertainty_z(m, 0), "num_samples must be an integer >= 1"),
-    (lambda m: unc.score_cameras(m, orbit_camera(8, 8), jnp.zeros((2, 2)), settings=SMALL),
+    (lambda m: sample(m, jnp.zeros(3)), r"z must have shape \(2,\)"),
+    (lambda m: sample_z(m, 0), "num_samples must be an integer >= 1"),
+    (lambda m: unc.score_cameras(m, orbit_camera(0.3, 0.4, width=8, height=8, distance=3.5),
+                                 jnp.zeros((2, 2)), settings=SMALL),
      "batched over one axis"),
     (lambda m: samplers.sobol_z(4, 2, -1), "sobol_z: seed must be an integer in"),
-    (lambda m: samplers.draw_z(m, 2, 0), "draw_z: key must be one JAX PRNG key"),
-    (lambda m: samplers.draw_z(m, 2, None, sobol_rows=np.zeros((3, 2))),
-     r"draw_z: sobol_rows must have shape \[2, 2\]"),
-    (lambda m: unc.uncertainty_z(m, 2, seed=-1), r"seed must be an integer in \[0, "),
-    (lambda m: unc.uncertainty_z(m, 2, seed=0.5), "seed must be an integer"),
+    (lambda m: samplers.draw_z(m, 2, None, np.zeros((3, 2))),
+     r"rows must have shape \[2, 2\] \(Sobol rows of the step\)"),
+    (lambda m: sample_z(m, 2, seed=-1), r"seed must be an integer in \[0, "),
+    (lambda m: sample_z(m, 2, seed=0.5), "seed must be an integer"),
     (lambda m: unc.pixel_variance(jnp.zeros((0, 4, 4, 3))), r"rgbs must have shape \[M >= 1, "),
     (lambda m: unc.score_cameras(m, _cams(), jnp.zeros((2, 2)), settings=SMALL, chunk_size=0),
      "chunk_size must be an integer >= 1, got 0"),
@@ -342,10 +345,12 @@ def test_sampler_spec_table(kwargs, message):
      "max_budget must be an integer >= 1"),
     (lambda m: unc.score_cameras(m, _cams(), jnp.zeros((2, 2)), settings=SMALL,
                                  background=(1.0, 1.0)), r"background must have shape \[3\]"),
-    (lambda m: unc.uncertainty(m, orbit_camera(8, 8), jnp.zeros((2, 2)),
+    (lambda m: unc.uncertainty(m, orbit_camera(0.3, 0.4, width=8, height=8, distance=3.5),
+                               jnp.zeros((2, 2)),
                                background=np.array([0.0, NAN, 0.0])),
      r"background\[1\] is not finite"),
-    (lambda m: unc.uncertainty(m, orbit_camera(8, 8), jnp.zeros((2, 2)), num_devices=0),
+    (lambda m: unc.uncertainty(m, orbit_camera(0.3, 0.4, width=8, height=8, distance=3.5),
+                               jnp.zeros((2, 2)), num_devices=0),
      r"num_devices must be an integer in \[1, "),
 ])
 def test_sampler_and_uncertainty_table(call, message):
@@ -375,8 +380,9 @@ def test_z_without_samples_or_with_a_non_finite_one_is_refused(case, entry):
   U would come out finite and wrong. M = 0 would be a mean over nothing (NaN)."""
   z, message = Z_BAD[case]
   calls = {
-      "uncertainty": lambda: unc.uncertainty(random_model("lowrank", num=8), orbit_camera(8, 8),
-                                             z, settings=SMALL),
+      "uncertainty": lambda: unc.uncertainty(
+          random_model("lowrank", num=8),
+          orbit_camera(0.3, 0.4, width=8, height=8, distance=3.5), z, settings=SMALL),
       "score_cameras": lambda: unc.score_cameras(random_model("lowrank", num=8), _cams(), z,
                                                  settings=SMALL),
       "light_uncertainty": lambda: lu.light_uncertainty(_relightable(), _cams(), z,
@@ -422,11 +428,12 @@ def test_under_jit_a_non_finite_z_or_light_gives_nan_never_a_finite_u():
 def test_scores_of_invalid_cameras_are_nan_and_leave_the_others_alone():
   """One invalid candidate camera gives U = NaN for itself only (never a silent 0)."""
   model = random_model("lowrank", num=16)
-  good = np.asarray(orbit_camera(8, 8, distance=3.0).world_to_camera, np.float32)
+  good = np.asarray(orbit_camera(0.3, 0.4, width=8, height=8, distance=3.0).world_to_camera,
+                    np.float32)
   cams = Camera(jnp.asarray(np.stack([good, np.diag([1.0, 1, -1, 1]).astype(np.float32) @ good,
                                       good])),
                 jnp.full(3, 6.0), jnp.full(3, 6.0), jnp.full(3, 4.0), jnp.full(3, 4.0), 8, 8)
-  z = unc.uncertainty_z(model, 2)
+  z = sample_z(model, 2)
   scores, _ = unc.score_cameras(model, cams, z, settings=SMALL, num_devices=1)
   values = np.asarray(scores.values)
   assert np.isnan(values[1]) and np.all(np.isfinite(values[[0, 2]]))
@@ -434,7 +441,7 @@ def test_scores_of_invalid_cameras_are_nan_and_leave_the_others_alone():
 
 
 def test_one_sample_is_allowed_and_gives_zero_uncertainty():
-  z = unc.uncertainty_z(random_model("lowrank", num=16), 1)
+  z = sample_z(random_model("lowrank", num=16), 1)
   assert z.shape == (1, 2)
   rgbs = jnp.asarray(np.random.default_rng(0).uniform(size=(1, 4, 5, 3)), jnp.float32)
   assert not np.any(np.asarray(unc.pixel_variance(rgbs)))  # Eq. 10 with M = 1: exactly 0
@@ -574,8 +581,8 @@ TRAINING_BAD = [  # (field, value, message fragment)
     ("model.init_opacity", 1.0, "config.model.init_opacity = 1.0: must be a finite number"),
     ("sampler.kind", "gauss", "config.sampler.kind = 'gauss'"),
     ("sampler.rank", 0, "config.sampler.rank = 0: must be an integer >= 1"),
-    ("sampler.groups", ("means", "means"), "repeats 'means'"),
-    ("sampler.groups", ("means", "colour"), "'colour' is not one of"),
+    ("sampler.groups", ("means", "means"), "'means' repeats"),
+    ("sampler.groups", ("means", "colour"), "'colour' is not one"),
     ("sampler.num_samples", 0, "config.sampler.num_samples = 0"),
     ("sampler.z", "halton", "config.sampler.z = 'halton'"),
     ("sampler.bounds.means", 0.0, "config.sampler.bounds.means = 0.0"),
@@ -587,8 +594,8 @@ TRAINING_BAD = [  # (field, value, message fragment)
     ("densify.opacity_reset_every", 0, "config.densify.opacity_reset_every = 0"),
     ("densify.min_opacity", 1.0, "config.densify.min_opacity = 1.0"),
     ("render.max_intersections", 0, "config.render.max_intersections = 0"),
-    ("render.max_budget", 1024, "config.render.max_intersections = 4096 must be <= "
-                                "config.render.max_budget = 1024"),
+    ("render.max_budget", 1024, "config.render.max_budget = 1024: must be an integer >= "
+                                "max_intersections = 4096"),
     ("render.tile_size", 0, "config.render.tile_size = 0"),
     ("render.chunks_per_step", 0, "config.render.chunks_per_step = 0"),
     ("train.num_steps", 0, "config.train.num_steps = 0: must be an integer >= 1"),
@@ -647,7 +654,10 @@ def test_train_refuses_a_bad_config_before_any_step(tiny_dataset, tmp_path):
   for field, value in (("checkpoint_every", 0), ("keep_checkpoints", -1)):
     config = tiny_config("lowrank", **{f"train.{field}": value})
     with pytest.raises(ConfigError, match=f"config.train.{field}"):
-      loop.train(config, tiny_dataset.train, checkpoint_dir=str(tmp_path / "c"))
+      validate_training(config)
+    with pytest.raises(ValueError, match=f"{field} must be an integer >= 1"):
+      train_with(tiny_config("lowrank"), tiny_dataset, checkpoint_dir=str(tmp_path / "c"),
+                 **{field: value})
   assert not (tmp_path / "c").exists()
   for keep in (0, -1, True, 1.5):
     with pytest.raises(ValueError, match="keep = .*: must be an integer >= 1"):
@@ -734,7 +744,7 @@ def test_the_workdir_guard_lets_speed_and_bookkeeping_fields_differ(tmp_path):
 @pytest.fixture(scope="module")
 def straight(tiny_dataset):
   """The uninterrupted 16-step run of `resume_config` (densification, budget growth)."""
-  return loop.train(resume_config(), tiny_dataset.train, bounds=tiny_dataset.bounds)
+  return train_with(resume_config(), tiny_dataset)
 
 
 def _assert_same_run(a, b, stopped_at=None):
@@ -754,11 +764,10 @@ def test_training_killed_at_several_points_resumes_bit_identically(tiny_dataset,
   """Killed before the first checkpoint (5), right after one (8), after densification (13):
   the resumed run equals the uninterrupted one, log included."""
   config, d = resume_config(), str(tmp_path / "checkpoints")
-  loop.train(config, tiny_dataset.train, bounds=tiny_dataset.bounds, checkpoint_dir=d,
-             stop_at=kill_at)
+  train_with(config, tiny_dataset, checkpoint_dir=d, checkpoint_every=8, stop_at=kill_at)
   saved = [os.path.basename(p) for p in ckpt.list_checkpoints(d)]
   assert saved == ([] if kill_at < 8 else ["ckpt_00000008.npz"])
-  resumed = loop.train(config, tiny_dataset.train, bounds=tiny_dataset.bounds, checkpoint_dir=d)
+  resumed = train_with(config, tiny_dataset, checkpoint_dir=d, checkpoint_every=8)
   _assert_same_run(straight, resumed, stopped_at=kill_at)
 
 
@@ -766,14 +775,13 @@ def test_training_killed_at_several_points_resumes_bit_identically(tiny_dataset,
 def test_a_corrupt_latest_checkpoint_falls_back_to_the_newest_intact_one(tiny_dataset, straight,
                                                                           tmp_path):
   config, d = resume_config(), str(tmp_path / "checkpoints")
-  loop.train(config, tiny_dataset.train, bounds=tiny_dataset.bounds, checkpoint_dir=d)
+  train_with(config, tiny_dataset, checkpoint_dir=d, checkpoint_every=8)
   latest = ckpt.list_checkpoints(d)[-1]
   assert latest.endswith("ckpt_00000016.npz")
   with open(latest, "r+b") as f:  # truncated, as by a full disk or an interrupted copy
     f.truncate(os.path.getsize(latest) // 2)
   with pytest.warns(UserWarning, match=r"ckpt_00000016.npz is unreadable \(BadZipFile"):
-    resumed = loop.train(config, tiny_dataset.train, bounds=tiny_dataset.bounds,
-                         checkpoint_dir=d)
+    resumed = train_with(config, tiny_dataset, checkpoint_dir=d, checkpoint_every=8)
   _assert_same_run(straight, resumed)  # re-ran 8 -> 16 from the intact checkpoint
   assert ckpt.read_meta(latest)["step"] == 16  # and replaced the corrupt file
 
@@ -799,22 +807,25 @@ def test_without_an_intact_checkpoint_resuming_is_refused(tiny_dataset, tmp_path
     (d / f"ckpt_{step:08d}.npz").write_bytes(b"")
   with pytest.warns(UserWarning), pytest.raises(
       ckpt.CorruptCheckpointError, match=r"no readable checkpoint.*ckpt_00000016.*ckpt_00000008"):
-    loop.train(config, tiny_dataset.train, bounds=tiny_dataset.bounds, checkpoint_dir=str(d))
+    train_with(config, tiny_dataset, checkpoint_dir=str(d))
 
 
 def test_checkpoints_of_another_config_are_refused(tiny_dataset, tmp_path):
   config, d = resume_config(), str(tmp_path / "checkpoints")
-  setup = loop.make_setup(config, tiny_dataset.train)
-  state = loop.init_state(config, setup, tiny_dataset.bounds)
-  ckpt.save_checkpoint(d, state, loop._meta(config, setup, state, [], 0.0))
+  train_with(config, tiny_dataset, checkpoint_dir=d, checkpoint_every=1, stop_at=1)
   other = resume_config()
   other.loss.ssim_weight = 0.5
-  with pytest.raises(WorkdirError, match=r"different config \(differences: loss.ssim_weight\)"):
-    loop.train(other, tiny_dataset.train, bounds=tiny_dataset.bounds, checkpoint_dir=d)
+  with pytest.raises(WorkdirError, match=r"different training settings \(differences: "
+                                         r"loss.ssim_weight\)"):
+    train_with(other, tiny_dataset, checkpoint_dir=d)
   other = resume_config()
   other.seed = 1
   with pytest.raises(WorkdirError, match="seed 0, this run has seed 1"):
-    loop.train(other, tiny_dataset.train, bounds=tiny_dataset.bounds, checkpoint_dir=d)
+    train_with(other, tiny_dataset, checkpoint_dir=d)
+  other = resume_config()
+  other.sampler.rank = 3
+  with pytest.raises(WorkdirError, match="another sampler"):
+    train_with(other, tiny_dataset, checkpoint_dir=d)
 
 
 @pytest.mark.slow
@@ -872,11 +883,11 @@ PLANNING_BAD = [  # (field, value, message fragment)
                            "config.max_views = 3"),
     ("eval_views", (2, 2), "repeats 2"),
     ("eval_views", (0, 3), "0 is not an integer >= 1"),
-    ("max_views", 9, "config.max_views = 9 must be <= config.data.num_candidates = 8"),
-    ("initial_view", 8, "config.initial_view = 8 must be < config.data.num_candidates = 8"),
+    ("max_views", 9, "config.max_views = 9 must be <= config.data.num_train = 8"),
+    ("initial_view", 8, "config.initial_view = 8 must be < config.data.num_train = 8"),
     ("paired_references", ("farthest", "nope"), "'nope' is not one of"),
     ("data.kind", "nerf", "config.data.kind = 'nerf'"),
-    ("data.num_candidates", 0, "config.data.num_candidates = 0"),
+    ("data.num_train", 0, "config.data.num_train = 0"),
     ("data.synthetic.v_range", (0.6, 0.1), "strictly increasing"),
     ("data.synthetic.distance", 0.4, r"config.data.synthetic.distance = 0.4: must be a finite "
                                      r"number > 0.5"),
@@ -889,7 +900,7 @@ PLANNING_BAD = [  # (field, value, message fragment)
                                         "integer >= 2"),
     ("strategy.optimize.samples", 1, "config.strategy.optimize.samples = 1"),
     ("strategy.optimize.sampler", "gauss", "config.strategy.optimize.sampler = 'gauss'"),
-    ("strategy.fisher.groups", ("means", "means"), "repeats 'means'"),
+    ("strategy.fisher.groups", ("means", "means"), "'means' repeats"),
     ("strategy.activenerf.prior_var", 0.0, "config.strategy.activenerf.prior_var = 0.0"),
     ("strategy.acp.resolution", 0, "config.strategy.acp.resolution = 0"),
     ("figures.landscape_u", 0, "config.figures.landscape_u = 0"),

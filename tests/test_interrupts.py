@@ -9,7 +9,7 @@ import time
 import jax
 import numpy as np
 import pytest
-from conftest import tiny_config
+from conftest import tiny_config, train_with
 
 from mfsample import interrupts
 from mfsample.train import loop
@@ -41,7 +41,7 @@ def test_training_stopped_by_a_signal_checkpoints_and_resumes_bit_for_bit(tiny_d
                                                                           tmp_path,
                                                                           monkeypatch):
   config = tiny_config("lowrank")
-  reference = loop.train(config, tiny_dataset.train, bounds=tiny_dataset.bounds)
+  reference = train_with(config, tiny_dataset)
   view_for_step = loop.view_for_step
 
   def signalled_at_step_13(seed, step, num_views):
@@ -53,12 +53,10 @@ def test_training_stopped_by_a_signal_checkpoints_and_resumes_bit_for_bit(tiny_d
   directory = str(tmp_path / "ckpt")
   with interrupts.stop_at_safe_points(), pytest.raises(interrupts.Interrupted,
                                                        match="at step 14"):
-    loop.train(config, tiny_dataset.train, bounds=tiny_dataset.bounds,
-               checkpoint_dir=directory)
+    train_with(config, tiny_dataset, checkpoint_dir=directory)
   assert sorted(os.listdir(directory))[-1] == "ckpt_00000014.npz"  # step 13 was finished
   monkeypatch.setattr(loop, "view_for_step", view_for_step)
-  resumed = loop.train(config, tiny_dataset.train, bounds=tiny_dataset.bounds,
-                       checkpoint_dir=directory)
+  resumed = train_with(config, tiny_dataset, checkpoint_dir=directory)
   for a, b in zip(jax.tree.leaves(reference.state), jax.tree.leaves(resumed.state), strict=True):
     np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
 

@@ -33,7 +33,7 @@ def _run(config, workdir):
     return done
 
 
-JOB = jobs.Job("toy", _run, _validate, free_fields=("progress",), results=("runs",))
+JOB = jobs.Job("toy", "toy", _run, _validate, free_fields=("progress",), results=("runs",))
 
 
 def test_a_bad_config_is_refused_before_the_workdir_is_touched(tmp_path):

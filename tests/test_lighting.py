@@ -17,14 +17,15 @@ from conftest import float64
 
 from configs import light_planning
 from mfsample import config_checks
+from mfsample.config_blocks import data_spec
+from mfsample.data.datasets import load_light_data, scene_extent
 from mfsample.lighting import captures, field, lights, protocol, strategies, training
 from mfsample.lighting import optimize as opt_lib
 from mfsample.lighting import uncertainty as lu
+from mfsample.lighting.config import light_recipe
 from mfsample.lighting.config import validate as validate_lighting
-from mfsample.model import SamplerSpec
 from mfsample.renderer import RenderSettings
-from mfsample.renderer.budget import Budgets
-from mfsample.uncertainty import uncertainty_z
+from mfsample.samplers import SamplerSpec, sample_z
 
 N = 4  # light coefficients of the tiny variant
 SETTINGS = RenderSettings(max_intersections=1 << 12)
@@ -36,7 +37,15 @@ def tiny():
 
 @functools.cache
 def tiny_data():
-  return captures.make_light_data(tiny().data, N)
+  return load_light_data(data_spec(tiny().data), N)
+
+
+def tiny_start(config, data, steps):
+  """(`TrainSetup`, step-0 state) of the light protocol's field on `data`, for `steps` steps
+  in all."""
+  recipe = light_recipe(config, scene_extent(data.train_cameras))
+  recipe = recipe._replace(settings=recipe.settings.replace(num_steps=steps))
+  return training.start(recipe, int(config.seed), data.bounds)
 
 
 def cameras():
@@ -66,7 +75,7 @@ def random_model(kind="lowrank", out_coeffs=1, dtype=jnp.float32, seed=0):
 
 def u_of(model, xi, cams=None, z=None):
   cams = cameras() if cams is None else cams
-  z = uncertainty_z(model, 2, 6174) if z is None else z
+  z = sample_z(model, 2, seed=6174) if z is None else z
   return float(lu.light_uncertainty(model, cams, z, jnp.asarray(xi), settings=SETTINGS).value)
 
 
@@ -103,9 +112,7 @@ def test_radiance_is_linear_in_the_light_and_matches_the_basis_renders():
 def test_densification_moves_transfer_rows_with_their_gaussians():
   from mfsample.train import densify
 
-  config = tiny()
-  setup = training.make_setup(config, tiny_data().train_cameras, 100)
-  state = training.init_state(config, setup, tiny_data().bounds)
+  setup, state = tiny_start(tiny(), tiny_data(), 100)
   live = state.model.num_live
   t = np.asarray(state.model.params.mean["transfer_dc"]).copy()
   t[:live] = np.arange(live)[:, None, None, None]  # each row tagged by its index
@@ -125,7 +132,7 @@ def test_densification_moves_transfer_rows_with_their_gaussians():
   kept = out[:report.live, 0, 0, 0]
   # Survivors keep their tags; the copies carry their parents' tags (0..4).
   assert set(np.round(kept[-(report.cloned + 2 * report.split):])) <= set(range(5))
-  assert new.model.params.spread["transfer_dc"].shape[1:] == (1, N, 3, 2)
+  assert new.model.params.b_hat["transfer_dc"].shape[1:] == (1, N, 3, 2)
 
 
 @pytest.mark.slow
@@ -137,17 +144,16 @@ def test_a_batch_of_light_view_pairs_trains_like_its_pairs_one_by_one():
 
   from mfsample.train import step as step_lib
 
-  config = tiny()
   data = tiny_data()
-  setup = training.make_setup(config, data.train_cameras, 100)
-  state = training.init_state(config, setup, data.bounds)
+  setup, state = tiny_start(tiny(), data, 100)
   used = np.eye(N)[:2] * lights.UNIFORM_NORM
   images = jnp.asarray(np.stack([captures.capture(data.train_basis, x) for x in used]))
   inputs = (images, jnp.asarray(used, jnp.float32), cameras())
   pairs = [(0, 1), (1, 2)]  # (light slot, view)
   rows = setup.sobol[:2]
   one = step_lib.make_train_step(setup.step_config, setup.field)
-  singles = [one(state, inputs, (jnp.int32(light), jnp.int32(view)), rows[i:i + 1])
+  singles = [one(state, inputs, (jnp.asarray([light], jnp.int32),
+                                 jnp.asarray([view], jnp.int32)), rows[i:i + 1].reshape(1, 1, -1))
              for i, (light, view) in enumerate(pairs)]
   batch_cfg = dataclasses.replace(setup.step_config, batch_size=2)
   batch = step_lib.make_train_step(batch_cfg, setup.field)
@@ -166,7 +172,7 @@ def test_a_batch_of_light_view_pairs_trains_like_its_pairs_one_by_one():
 
 def test_u_is_a_quadratic_form_of_the_light():
   model = random_model()
-  z = uncertainty_z(model, 2, 6174)
+  z = sample_z(model, 2, seed=6174)
   gram, _ = lu.light_gram(model, cameras(), z, settings=SETTINGS)
   q = np.asarray(gram.q, np.float64)
   xi = np.array([2.0, -0.7, 0.4, 1.1])
@@ -187,7 +193,7 @@ def test_u_gradient_matches_finite_differences_in_float64():
   with float64():
     model = random_model(dtype=jnp.float64)
     cams = jax.tree.map(lambda x: jnp.asarray(x, jnp.float64), cameras())
-    z = uncertainty_z(model, 2, 6174)
+    z = sample_z(model, 2, seed=6174)
     xi = jnp.asarray([1.5, -0.4, 0.8, 0.3], jnp.float64)
 
     def u(x):
@@ -204,7 +210,7 @@ def test_u_gradient_matches_finite_differences_in_float64():
 
 def test_a_deterministic_model_has_zero_u():
   model = random_model(kind="deterministic")
-  z = uncertainty_z(model, 2, 6174)
+  z = sample_z(model, 2, seed=6174)
   assert u_of(model, [3.0, 1.0, -1.0, 0.5], z=z) == 0.0
 
 
@@ -212,13 +218,13 @@ def test_a_deterministic_model_has_zero_u():
 
 
 def _inputs(model, used):
-  z = uncertainty_z(model, 2, 6174)
+  z = sample_z(model, 2, seed=6174)
   gram, _ = lu.light_gram(model, cameras(), z, settings=SETTINGS)
   return strategies.LightInputs(
       model=model, cameras=cameras(), z=z, q=np.asarray(gram.q, np.float64),
       used=np.asarray(used), index=len(used), norm=lights.UNIFORM_NORM,
       ascent=opt_lib.AscentSettings(steps=40, lr=0.3, final_lr=0.01),
-      budgets=Budgets(u=SETTINGS))
+      renders=strategies.LightRenders(u=SETTINGS))
 
 
 @pytest.mark.slow
@@ -262,7 +268,7 @@ def test_every_strategy_returns_a_light_of_the_common_norm():
 
 def test_bad_lights_get_clear_errors():
   model = random_model()
-  z = uncertainty_z(model, 2, 6174)
+  z = sample_z(model, 2, seed=6174)
   with pytest.raises(ValueError, match=r"one SH light of 4 coefficients \(shape \[4\]\), got "
                      r"shape \[3\]"):
     lu.light_uncertainty(model, cameras(), z, [1.0, 2.0, 3.0], settings=SETTINGS)
@@ -341,10 +347,9 @@ def test_a_field_trained_on_all_basis_lights_reproduces_a_held_out_light():
   held_out, _ = lights.held_out_lights(N, num_environments=1, num_random=0, seed=5)
   truth = captures.capture(data.train_basis, held_out[0])
   dc_only = captures.capture(data.train_basis, held_out[0] * (np.arange(N) == 0))
-  setup = training.make_setup(config, data.train_cameras, steps)
-  state = training.init_state(config, setup, data.bounds)
+  setup, state = tiny_start(config, data, steps)
   images = np.stack([captures.capture(data.train_basis, x) for x in used])
-  res = training.train_steps(config, setup, state, jnp.asarray(images),
+  res = training.train_steps(setup, state, jnp.asarray(images),
                              jnp.asarray(used, jnp.float32), cams, num_lights=N,
                              phase_start=0, end=steps, max_traces=1)
   assert int(res.state.step) == steps

@@ -7,20 +7,17 @@ import numpy as np
 import pytest
 
 from mfsample import Gaussians
+from mfsample.groups import GROUPS
 from mfsample.model import (
-  GROUPS,
-  SamplerSpec,
-  activate,
-  capacity_bucket,
-  generator,
-  group_shapes,
-  init_model,
-  init_spread,
-  knn_scale,
-  mean_gaussians,
-  project_spread,
-  spread_magnitude,
+    activate,
+    capacity_bucket,
+    group_shapes,
+    init_b_hat,
+    init_model,
+    knn_scale,
+    mean_gaussians,
 )
+from mfsample.samplers import SamplerSpec, b_hat_magnitude, clamp_b_hat, signed_b_hat
 
 BOUNDS = (("means", 4.0), ("log_scales", 20.0), ("quats", 2.0), ("opacity_logits", 20.0),
           ("sh_dc", 0.5), ("sh_rest", 0.5))
@@ -48,12 +45,12 @@ def test_init_model_shapes_and_mask():
   assert model.capacity == capacity_bucket(100) == 256
   assert model.num_live == 100 and model.max_sh_degree == 2
   assert model.params.mean["sh_rest"].shape == (256, 8, 3)
-  assert model.params.spread["means"].shape == (256, 3, 3)
-  assert model.params.spread["opacity_logits"].shape == (256, 3)
+  assert model.params.b_hat["means"].shape == (256, 3, 3)
+  assert model.params.b_hat["opacity_logits"].shape == (256, 3)
   assert model.signs["sh_rest"].dtype == jnp.int8
   assert set(np.unique(np.asarray(model.signs["means"])[:100])) <= {-1, 1}
   # Padding rows carry no B_hat and never enter a render.
-  assert not np.any(np.asarray(model.params.spread["means"])[100:])
+  assert not np.any(np.asarray(model.params.b_hat["means"])[100:])
   g = mean_gaussians(model)
   g.validate()
   np.testing.assert_allclose(np.asarray(g.opacities)[:100], 0.1, rtol=1e-5)
@@ -62,14 +59,14 @@ def test_init_model_shapes_and_mask():
 def test_degree_0_model_has_no_sh_rest_anywhere():
   model = init_model(jax.random.PRNGKey(0), _points(10), spec=_spec(), sh_degree=0,
                      init_scales=SCALES)
-  assert "sh_rest" not in model.params.mean and "sh_rest" not in model.params.spread
+  assert "sh_rest" not in model.params.mean and "sh_rest" not in model.params.b_hat
   assert mean_gaussians(model).sh.shape == (model.capacity, 1, 3)
 
 
 def test_deterministic_model_has_no_spread():
   model = init_model(jax.random.PRNGKey(0), _points(10), spec=_spec("deterministic"),
                      sh_degree=1, init_scales=SCALES)
-  assert model.params.spread == {} and model.signs == {}
+  assert model.params.b_hat == {} and model.signs == {}
 
 
 def test_capacity_buckets_are_power_of_two_ish_and_monotonic():
@@ -97,18 +94,18 @@ def test_activate_applies_constraints_in_one_place():
 def test_generator_is_relu_times_sign_and_projection_bounds():
   spread = {"sh_dc": jnp.array([[-1.0, 0.0, 0.3, 7.0]])}
   signs = {"sh_dc": jnp.array([[1, -1, -1, 1]], jnp.int8)}
-  np.testing.assert_allclose(generator(spread, signs)["sh_dc"], [[0.0, 0.0, -0.3, 7.0]])
+  np.testing.assert_allclose(signed_b_hat(spread, signs)["sh_dc"], [[0.0, 0.0, -0.3, 7.0]])
   spec = _spec(groups=("sh_dc",))
-  np.testing.assert_allclose(project_spread(spread, spec)["sh_dc"], [[0.0, 0.0, 0.3, 0.5]])
+  np.testing.assert_allclose(clamp_b_hat(spread, spec)["sh_dc"], [[0.0, 0.0, 0.3, 0.5]])
   # The relu passes gradient at exactly 0, so the volume term can revive a parked entry.
-  grad = jax.grad(lambda s: jnp.sum(spread_magnitude({"sh_dc": s})["sh_dc"]))(spread["sh_dc"])
+  grad = jax.grad(lambda s: jnp.sum(b_hat_magnitude({"sh_dc": s})["sh_dc"]))(spread["sh_dc"])
   np.testing.assert_allclose(grad, [[0.0, 1.0, 1.0, 1.0]])
 
 
 def test_init_spread_scales_and_signs():
   shapes = group_shapes(0)
   scales = dict(SCALES, means=5e-3)
-  spread, signs = init_spread(np.random.default_rng(1), 1000, shapes,
+  spread, signs = init_b_hat(np.random.default_rng(1), 1000, shapes,
                               _spec(rank=2, groups=("means", "sh_dc")), scales)
   assert set(spread) == {"means", "sh_dc"}
   assert spread["means"].shape == (1000, 3, 2)

@@ -226,6 +226,7 @@ def test_training_data_and_planning_pool_of_a_capture(tmp_path):
   """data.kind = "nerfstudio": the holdout split, the points for init_from = "points", and a
   fixed planning pool."""
   from configs import camera_planning
+  from mfsample.config_blocks import data_spec
   from mfsample.data import datasets as data_lib
   from mfsample.planning.config import validate as validate_planning
   from mfsample.planning.pool import make_pool
@@ -238,7 +239,7 @@ def test_training_data_and_planning_pool_of_a_capture(tmp_path):
   config.data.holdout_every = 2
   config.model.init_from = "points"
   validate(config)
-  ds = data_lib.load_dataset(config.data)
+  ds = data_lib.load_dataset(data_spec(config.data))
   assert [n[:5] for n in ds.test.names] == ["00000", "00002"] and len(ds.train) == 2
   assert len(ds.points) == 20
   np.testing.assert_allclose(ds.bounds[0], np.percentile(ds.points.xyz, 1, axis=0), rtol=1e-6)
@@ -250,5 +251,5 @@ def test_training_data_and_planning_pool_of_a_capture(tmp_path):
   planning.max_views = 2
   planning.eval_views = (2,)
   validate_planning(planning)
-  pool = make_pool(planning.data)
+  pool = make_pool(data_spec(planning.data))
   assert len(pool.candidates) == 2 and len(pool.test) == 2 and len(pool.points) == 20

@@ -1,4 +1,4 @@
-"""Tests of mfsample.next_views: the uncertainty job, on a synthetic scene and on a COLMAP
+"""Tests of mfsample.your_data: the uncertainty job, on a synthetic scene and on a COLMAP
 capture with a .ply trained by the job itself."""
 
 import json
@@ -12,9 +12,11 @@ from absl import flags
 from ml_collections import config_flags
 
 from configs import next_views as next_views_configs
+from mfsample.config_blocks import data_spec
 from mfsample.config_checks import ConfigError
-from mfsample.next_views import run_next_views, sphere_candidates, top_k
-from mfsample.next_views.candidates import capture_up
+from mfsample.selection import top_k
+from mfsample.your_data import run_next_views, sphere_candidates
+from mfsample.your_data.candidates import capture_up
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 
@@ -48,7 +50,7 @@ def test_the_viewer_reads_the_job_as_it_wrote_it(joint_run):
   """The viewer (`mfsample.viewer`) rebuilds the candidates from config.json as the job split
   them, reads the model from the checkpoint and finds the job's U of the first proposal."""
   from mfsample.viewer import open_run
-  from mfsample.viewer.models import Renderer, samples
+  from mfsample.viewer.models import render_colour, samples
 
   workdir, _ = joint_run
   run = open_run(workdir)
@@ -66,8 +68,8 @@ def test_the_viewer_reads_the_job_as_it_wrote_it(joint_run):
   with open(os.path.join(workdir, "results.json")) as f:
     assert model.num_live == json.load(f)["live_gaussians"]
   num, seed = run.u_samples()
-  _, _, u = Renderer().colour(model, step.proposals[0].camera, samples(model, num, seed),
-                              run.background())
+  _, _, u, _ = render_colour(model, step.proposals[0].camera, samples(model, num, seed),
+                             run.background())
   assert u == pytest.approx(record["top_k"][0]["u"], rel=1e-4)
   truth = run.ground_truth(step, "candidates", step.proposals[0].index)
   assert truth.shape == (32, 32, 3)
@@ -96,7 +98,7 @@ def test_colmap_capture_and_a_ply_get_posthoc_uncertainty(joint_run, tmp_path):
   from mfsample.data.ply import load_ply
 
   config = next_views_configs.get_config("tiny")
-  dataset = data_lib.load_dataset(config.data)
+  dataset = data_lib.load_dataset(data_spec(config.data))
   both = dataset.train.subset(range(12)).replace(names=())
   xyz = np.asarray(synthetic.synthetic_gaussians(config.data.synthetic.num_gaussians, 0).means)
   export_colmap(tmp_path / "capture", both, PointCloud(xyz, np.full_like(xyz, 0.5)))
@@ -200,7 +202,7 @@ def test_figure_lays_out_one_to_hundreds_of_candidates_without_overlapping_text(
   import matplotlib.pyplot as plt
   from matplotlib.text import Text
 
-  from mfsample.next_views.figure import build_figure, next_views_figure
+  from mfsample.your_data.figure import build_figure, next_views_figure
 
   rng = np.random.default_rng(num_candidates)
   d = rng.normal(size=(num_candidates, 3))
@@ -243,7 +245,7 @@ def test_a_three_view_nerfstudio_capture_end_to_end(tmp_path):
   from mfsample.data.nerfstudio import NS_PROCESS_DATA_TRANSFORM
 
   config = next_views_configs.get_config("tiny")
-  dataset = datasets.load_dataset(config.data)
+  dataset = datasets.load_dataset(data_spec(config.data))
   xyz = np.asarray(synthetic.synthetic_gaussians(config.data.synthetic.num_gaussians, 0).means)
   export_nerfstudio(tmp_path / "capture", dataset.train.subset(range(3)),
                     PointCloud(xyz, np.full_like(xyz, 0.5)),

@@ -15,7 +15,7 @@ from conftest import float64
 from planning_testlib import tiny_config, tiny_pool, trained_one_view
 
 from mfsample import RenderSettings, jobs
-from mfsample import uncertainty as unc
+from mfsample import view_uncertainty as unc
 from mfsample.baselines import activenerf
 from mfsample.planning import (
   optimize,
@@ -24,7 +24,9 @@ from mfsample.planning import (
   strategies,
   tables,
 )
+from mfsample.planning.config import strategy_settings
 from mfsample.planning.pool import stack_cameras
+from mfsample.samplers import sample_z
 from mfsample.scenes import get_scene
 from mfsample.train.evaluate import mean_metrics
 
@@ -139,7 +141,7 @@ def _inputs(pool, config, model, views=(0, 3)):
 def test_every_strategy_returns_a_valid_camera(name, models):
   pool = tiny_pool()
   config = tiny_config()
-  strategy = strategies.make_strategy(name, config)
+  strategy = strategies.make_strategy(name, strategy_settings(config))
   inputs = _inputs(pool, config, models[strategy.model_kind])
   available = inputs.available
   choice = strategy.select(inputs, jax.random.PRNGKey(1))
@@ -175,19 +177,20 @@ def test_opt_best_keeps_the_pose_with_the_highest_selection_u(models, start, sca
   inputs = _inputs(pool, config, models["stochastic"], views=(0,))
   if start == "training":
     inputs = inputs._replace(available=np.arange(len(pool.candidates)) == 0)
-  choice = strategies.make_strategy("ours_opt_best", config).select(
+  choice = strategies.make_strategy("ours_opt_best", strategy_settings(config)).select(
       inputs, jax.random.PRNGKey(1))
   info = choice.info
   steps = config.strategy.optimize.steps
   np.testing.assert_array_equal(info["visited_steps"], strategies.visited_steps(steps, 5))
   # The start is Ours (Sel.)'s choice, scored by the same function.
-  sel = strategies.make_strategy("ours_sel", config).select(inputs, jax.random.PRNGKey(1))
+  sel = strategies.make_strategy("ours_sel", strategy_settings(config)).select(
+      inputs, jax.random.PRNGKey(1))
   assert info["start_index"] == sel.index and info["start_score"] == sel.score
   assert choice.score == max(sel.score, float(np.max(info["u_visited"])))
   if choice.index is None:
     assert info["kept_step"] == info["visited_steps"][np.argmax(info["u_visited"])] > 0
     # The returned camera is the visited pose that was scored, at the full image size.
-    again, _ = strategies._ours_scores(inputs, config.strategy.ours,
+    again, _ = strategies._ours_scores(inputs, strategy_settings(config).ours,
                                        stack_cameras([choice.camera]))
     np.testing.assert_allclose(again[0], choice.score, rtol=1e-5)
     _valid_camera(choice.camera, pool.sphere)
@@ -210,7 +213,7 @@ def test_visited_steps():
 
 def test_farthest_point_picks_the_farthest_candidate():
   pool = tiny_pool()
-  strategy = strategies.make_strategy("farthest", tiny_config())
+  strategy = strategies.make_strategy("farthest", strategy_settings(tiny_config()))
   inputs = strategies.Inputs(None, stack_cameras([pool.candidates.cameras[0]]),
                              pool.candidates.cameras, np.arange(8) != 0, pool.sphere,
                              pool.bounds, pool.background)
@@ -225,7 +228,7 @@ def test_optimisation_increases_uncertainty_and_respects_the_band(models):
   pool = tiny_pool()
   model = models["stochastic"]
   o = tiny_config().strategy.optimize
-  z = unc.uncertainty_z(model, int(o.samples), seed=6174)
+  z = sample_z(model, int(o.samples), seed=6174)
   sphere = pool.sphere.replace(width=pool.sphere.width // o.downscale,
                                height=pool.sphere.height // o.downscale)
   opt = optimize.OptimizeSettings(steps=o.steps, lr=o.lr, z_drop_step=o.z_drop_step,
@@ -251,7 +254,7 @@ def test_resampled_optimisation_draws_fresh_z_from_its_key(models):
   pool = tiny_pool()
   model = models["stochastic"]
   sphere = pool.sphere.replace(width=8, height=8)
-  z = unc.uncertainty_z(model, 2, seed=6174)
+  z = sample_z(model, 2, seed=6174)
   opt = optimize.OptimizeSettings(steps=3, lr=1e-2, z_drop_step=3, resample_z=True)
   uv0 = poses.camera_to_uv(pool.candidates.cameras[4])
   with pytest.raises(ValueError, match="PRNG key"):
@@ -339,17 +342,18 @@ def test_rounds_densify_when_their_config_asks():
   config.round_train.loss.volume_weight = None
   pool = tiny_pool()
   selected = [runner.candidate_view(pool, i) for i in (0, 4)]
-  trained = runner.Trainer(config, pool).round_state("stochastic", selected, 0)
+  trained, _ = runner.Trainer(config, pool).round_state("stochastic", selected, 0,
+                                                        jobs.Budgets())
   live = int(np.asarray(trained.model.mask).sum())
   assert live > config.round_train.model.init_points  # densified
   assert live <= config.round_train.model.max_gaussians
-  z = unc.uncertainty_z(trained.model, 2)
+  z = sample_z(trained.model, 2)
   u = unc.uncertainty(trained.model, selected[0].camera, z).value
   assert np.isfinite(float(u)) and float(u) > 0.0
   # The paper's warm start continues one padded state, which cannot change shape.
   config.rounds.warm_start = True
   with pytest.raises(ValueError, match="cannot densify"):
-    runner.Trainer(config, pool).round_state("stochastic", selected, 0)
+    runner.Trainer(config, pool).round_state("stochastic", selected, 0, jobs.Budgets())
 
 
 @pytest.mark.slow
@@ -362,11 +366,11 @@ def test_final_models_densify_when_their_config_asks():
   pool = tiny_pool()
   selected = [runner.candidate_view(pool, i) for i in (0, 4)]
   trainer = runner.Trainer(config, pool)
-  model = trainer.final_model(selected, 0)
+  model, budgets = trainer.final_model(selected, 0, jobs.Budgets())
   live = int(np.asarray(model.mask).sum())
   assert t.model.init_points < live <= t.model.max_gaussians
   metrics, _ = mean_metrics(model, pool.test, background=pool.background,
-                              settings=trainer.settings_of("final"))
+                            settings=budgets.get("final"))
   assert np.isfinite(metrics["psnr"])
 
 

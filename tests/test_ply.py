@@ -6,17 +6,20 @@ import numpy as np
 import plyfile
 import pytest
 
+from mfsample import orbit_camera
 from mfsample.data import DatasetError
 from mfsample.data.ply import (
-                               export_gaussians,
-                               export_ply,
-                               load_ply,
-                               ply_arrays,
-                               sh_degree_of,
+  export_gaussians,
+  export_ply,
+  load_ply,
+  ply_arrays,
+  sh_degree_of,
 )
-from mfsample.model import GROUPS, SamplerSpec, init_model, mean_gaussians, model_from_mean
+from mfsample.groups import GROUPS
+from mfsample.model import init_model, mean_gaussians, model_from_mean
 from mfsample.renderer import RenderSettings, render
-from mfsample.testing import orbit_camera, random_gaussians
+from mfsample.samplers import SamplerSpec
+from mfsample.testing import random_gaussians
 
 SPEC = SamplerSpec(kind="lowrank", rank=2, groups=("means",), bounds=(("means", 1.0),))
 SCALES = {g: 1e-3 for g in GROUPS}
@@ -108,7 +111,7 @@ def test_a_loaded_model_renders_as_its_gaussians(tmp_path):
   loaded = model_from_mean(jax.random.PRNGKey(3), load_ply(path), spec=SPEC,
                            init_scales=SCALES, capacity=model.capacity)  # one compilation
   assert int(loaded.sh_degree) == 1 and loaded.num_live == 40  # every band active
-  camera = orbit_camera(24, 20)
+  camera = orbit_camera(0.3, 0.4, width=24, height=20, distance=3.5)
   settings = RenderSettings(max_intersections=1 << 12)
   want = render(mean_gaussians(model.replace(sh_degree=jnp.int32(1))), camera,
                 settings=settings)

@@ -1,7 +1,7 @@
 """Tests of mfsample.train.posthoc: B_hat fitted to a frozen 3DGS model.
 
-The capture and the configuration are those of docs/your_data.md's example
-(`testing.write_tiny_capture`, the default training config, 100 steps), so the example run
+The capture and the settings are those of docs/your_data.md's example
+(`testing.write_tiny_capture`, the default `TrainSettings`, 100 steps), so the example run
 by tests/test_readme.py reuses this file's compiled step.
 """
 
@@ -12,21 +12,30 @@ import numpy as np
 import pytest
 
 import mfsample as mf
-from mfsample.data import DatasetError, load_colmap, load_ply
+from mfsample.data import datasets, load_colmap, load_ply
 from mfsample.data.ply import ply_arrays, raw_from_gaussians, write_ply
+from mfsample.model import model_from_mean
 from mfsample.train import checkpoint as ckpt
-from mfsample.train.posthoc import POSTHOC_VOLUME_WEIGHT, fit_spread, posthoc_config
+from mfsample.train.posthoc import POSTHOC_VOLUME_WEIGHT, posthoc_settings, run_b_hat_fit
 
 STEPS = 100
 NUM_UNSEEN = 40
+SETTINGS = mf.TrainSettings(num_steps=STEPS)
 
 
-def _config():
-  config = mf.train.default_config()
-  config.train.num_steps = STEPS
-  config.train.checkpoint_every = 40
-  config.train.progress = False
-  return config
+def _field(path, views):
+  """(the stochastic field whose mean is the .ply's model, the scene extent): the default
+  sampler (lowrank, rank 2, every group), fresh B_hat, seed 0."""
+  mean = load_ply(path)
+  extent = datasets.scene_extent(views.cameras)
+  spec = mf.SamplerSpec.default(tuple(mean), extent=extent)
+  return model_from_mean(jax.random.key(0), mean, spec=spec,
+                         init_scales=SETTINGS.b_hat_init_scales(extent)), extent
+
+
+def _fit(views, path, **kwargs):
+  model, extent = _field(path, views)
+  return run_b_hat_fit(model, views, SETTINGS, seed=0, extent=extent, **kwargs)
 
 
 @pytest.fixture(scope="module")
@@ -54,7 +63,7 @@ def pretrained(tmp_path_factory):
   mean = {g: np.concatenate([raw[g], extra[g]]) for g in raw}
   mean["sh_rest"] = np.zeros((200 + m, 3, 3))
   path = write_ply(root / "model.ply", ply_arrays(mean))
-  return views, path, fit_spread(_config(), views, path)
+  return views, path, _fit(views, path)
 
 
 @pytest.mark.slow
@@ -70,40 +79,52 @@ def test_fit_keeps_the_mean_and_grows_b_hat_where_no_view_looks(pretrained):
   # The data term holds B_hat of the Gaussians the views see; the volume term alone acts
   # on those no view sees (the same initial entries and learning rates otherwise). Centres
   # and colours show it most (opacities of nearly opaque Gaussians barely move a pixel).
-  spread = {g: np.asarray(v) for g, v in model.params.spread.items()}
+  b_hat = {g: np.asarray(v) for g, v in model.params.b_hat.items()}
   seen = n - NUM_UNSEEN
-  assert spread["means"][seen:n].mean() > 2.0 * spread["means"][:seen].mean()
-  assert spread["sh_dc"][seen:n].mean() > 2.0 * spread["sh_dc"][:seen].mean()
-  assert all(np.all(v[n:] == 0.0) for v in spread.values())  # padding never moves
+  assert b_hat["means"][seen:n].mean() > 2.0 * b_hat["means"][:seen].mean()
+  assert b_hat["sh_dc"][seen:n].mean() > 2.0 * b_hat["sh_dc"][:seen].mean()
+  assert all(np.all(v[n:] == 0.0) for v in b_hat.values())  # padding never moves
 
 
 @pytest.mark.slow
 def test_fit_resumes_exactly(pretrained, tmp_path):
   views, path, straight = pretrained
   directory = str(tmp_path / "ckpt")
-  fit_spread(_config(), views, path, checkpoint_dir=directory, stop_at=50)
+  _fit(views, path, checkpoint_dir=directory, checkpoint_every=40, stop_at=50)
   assert [os.path.basename(p) for p in ckpt.list_checkpoints(directory)] == \
       ["ckpt_00000040.npz"]
-  resumed = fit_spread(_config(), views, path, checkpoint_dir=directory)
+  resumed = _fit(views, path, checkpoint_dir=directory, checkpoint_every=40)
   assert int(resumed.state.step) == STEPS
   for a, b in zip(jax.tree.leaves(straight.state), jax.tree.leaves(resumed.state), strict=True):
     np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
   assert [e["step"] for e in resumed.history] == [e["step"] for e in straight.history]
 
 
-def test_posthoc_config_checks_before_running(pretrained, tmp_path):
+def test_the_functional_fit_is_the_recorded_one(pretrained):
+  """`mf.fit_b_hat` (the API's) is `run_b_hat_fit` with the seed drawn from its key."""
+  views, path, _ = pretrained
+  model, extent = _field(path, views)
+  settings = SETTINGS.replace(num_steps=3)
+  field, history = mf.fit_b_hat(model, views, settings, key=jax.random.key(7), extent=extent)
+  seed = int(jax.random.randint(jax.random.key(7), (), 0, np.iinfo(np.int32).max))
+  again = run_b_hat_fit(model, views, settings, seed=seed, extent=extent)
+  for a, b in zip(jax.tree.leaves(field), jax.tree.leaves(again.state.model), strict=True):
+    np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+  assert [e["step"] for e in history] == [3]
+
+
+def test_posthoc_settings_and_checks(pretrained):
   _, path, _ = pretrained
-  cfg = posthoc_config(_config(), path)
-  assert (cfg.model.init_from, cfg.model.sh_degree, cfg.densify.stop) == ("ply", 1, 0)
-  assert cfg.sampler.stochastic_until is None
-  assert cfg.loss.volume_weight == POSTHOC_VOLUME_WEIGHT  # None in the config: the default
-  assert cfg.loss.volume_stop_before_end == 5  # the default's 100 cut to 5% of 100 steps
-  config = _config()
-  config.loss.volume_weight = 0.5
-  assert posthoc_config(config, path).loss.volume_weight == 0.5  # a set value is kept
-  config.sampler.kind = "deterministic"
-  with pytest.raises(ValueError, match="deterministic"):
-    posthoc_config(config, path)
-  (tmp_path / "bad.ply").write_text("ply\nformat ascii 1.0\nelement vertex 0\nend_header\n")
-  with pytest.raises(DatasetError, match="bad.ply"):
-    posthoc_config(_config(), tmp_path / "bad.ply")
+  fitted = posthoc_settings(SETTINGS)
+  assert not fitted.train_mean and fitted.sh_degree_every == 0
+  assert (fitted.densify.start, fitted.densify.stop) == (0, 0)
+  assert fitted.stochastic_until is None
+  assert fitted.loss.volume_weight == POSTHOC_VOLUME_WEIGHT  # None in the settings: the default
+  assert fitted.loss.volume_stop_before_end == 5  # the default's 100 cut to 5% of 100 steps
+  kept = SETTINGS.replace(loss=SETTINGS.loss.replace(volume_weight=0.5))
+  assert posthoc_settings(kept).loss.volume_weight == 0.5  # a set value is kept
+  views, _, _ = pretrained
+  model, _ = _field(path, views)
+  plain = model.replace(spec=mf.SamplerSpec("deterministic", groups=()))
+  with pytest.raises(ValueError, match="no B_hat to fit"):
+    mf.fit_b_hat(plain, views, SETTINGS, key=jax.random.key(0))

@@ -6,14 +6,14 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from mfsample import RenderSettings
+from mfsample import RenderSettings, orbit_camera
 from mfsample.renderer.projection import (
-    covariance_3d,
-    footprint_sigma,
-    project_gaussians,
-    quat_to_rotmat,
+  covariance_3d,
+  footprint_sigma,
+  project_gaussians,
+  quat_to_rotmat,
 )
-from mfsample.testing import orbit_camera, random_gaussians
+from mfsample.testing import random_gaussians
 
 SETTINGS = RenderSettings()
 
@@ -43,7 +43,7 @@ def test_covariance_is_r_s2_rt():
 def test_conic_inverts_the_jacobian_projected_covariance():
   """Sigma_2d = J W Sigma W^T J^T + eps I, with J from autodiff of the pinhole map."""
   g = random_gaussians(20, seed=2, extent=0.5, scale_range=(0.05, 0.2))
-  cam = orbit_camera(64, 48, distance=3.0)
+  cam = orbit_camera(0.3, 0.4, width=64, height=48, distance=3.0)
   proj = project_gaussians(g.means, g.scales, g.quats, g.opacities, None, cam, SETTINGS)
   assert bool(jnp.all(proj.valid))
 
@@ -82,7 +82,7 @@ def test_footprint_radius_is_where_alpha_reaches_alpha_min():
 
 
 def test_culling():
-  cam = orbit_camera(32, 32, distance=3.0)
+  cam = orbit_camera(0.3, 0.4, width=32, height=32, distance=3.0)
   center, fwd, right = (np.asarray(cam.center), np.asarray(cam.rotation)[2],
                         np.asarray(cam.rotation)[0])
   means = np.stack([

@@ -11,11 +11,12 @@ from planning_testlib import poses, random_model
 
 from configs import uncertainty_quality
 from mfsample import config_checks
-from mfsample import uncertainty as unc
+from mfsample import view_uncertainty as unc
 from mfsample.planning import training
 from mfsample.quality import arc, benchmark, maps, run_uncertainty_quality, tables
 from mfsample.quality.config import validate as validate_quality
 from mfsample.renderer import RenderSettings, render
+from mfsample.samplers import sample_z
 
 
 def test_arc_cameras_face_the_target_and_split_odd_from_even():
@@ -57,7 +58,7 @@ def test_sample_maps_match_the_uncertainty_module():
   camera = poses.spherical_camera(np.array([0.15, 0.3], np.float32),
                                   poses.SphereSpec(radius=3.0, v_range=(0.05, 0.95), width=20,
                                                    height=16))
-  z = unc.uncertainty_z(model, 2)
+  z = sample_z(model, 2)
   s = RenderSettings(max_intersections=1 << 12)
   out = maps.sample_maps(model, camera, z, jnp.zeros(3), settings=s)
   ref = unc.uncertainty(model, camera, z, settings=s)
@@ -76,8 +77,10 @@ def test_sampler_flags_and_labels():
   for bad in ("lowrank:0", "lowrank:x", "full"):
     with pytest.raises(ValueError, match="sampler"):
       benchmark.parse_sampler(bad)
-  cfg = benchmark.model_config(uncertainty_quality.get_config().train, "block:4")
-  assert (cfg.sampler.kind, cfg.sampler.rank) == ("block", 4)
+  plan = benchmark.model_recipe(uncertainty_quality.get_config().train, "block:4")
+  assert (plan.spec.kind, plan.spec.rank) == ("block", 4)
+  assert benchmark.model_recipe(uncertainty_quality.get_config().train,
+                                "deterministic").spec.kind == "deterministic"
   assert tables.method_label("lowrank:2", "colour") == "Ours, rank 2: U (Eq. 10)"
   assert tables.method_label("deterministic", "fisher") == "FisherRF"
 
@@ -187,7 +190,7 @@ def test_posthoc_baseline_keeps_the_mean_and_scores_its_maps(tmp_path, monkeypat
   for g, v in model.params.mean.items():  # the deterministic model's mean, bit for bit
     np.testing.assert_array_equal(np.asarray(field.params.mean[g])[:n], np.asarray(v)[live],
                                   err_msg=g)
-  assert any(float(np.max(v)) > 0 for v in jax.tree.leaves(field.params.spread))
+  assert any(float(np.max(v)) > 0 for v in jax.tree.leaves(field.params.b_hat))
   (record,) = results["ause"]["records"]
   assert record["methods"] == ["posthoc_colour", "posthoc_depth"]
   assert record["posthoc"]["steps"] == 20 and record["posthoc"]["mean_unchanged"]

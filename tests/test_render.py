@@ -24,14 +24,14 @@ from render_testlib import (
   render_and_grads,
 )
 
-from mfsample import Camera, Gaussians, RenderSettings, render
+from mfsample import Camera, Gaussians, RenderSettings, orbit_camera, render
 from mfsample._pytree import replace
 from mfsample.renderer.composite import composite
 from mfsample.renderer.projection import footprint_sigma, project_gaussians, view_directions
 from mfsample.renderer.reference import render_reference
 from mfsample.renderer.sh import sh_to_color
 from mfsample.renderer.tiles import intersect_tiles
-from mfsample.testing import orbit_camera, random_gaussians
+from mfsample.testing import random_gaussians
 
 
 @pytest.mark.parametrize("sh_degree, settings", [(3, SMALL), (0, RenderSettings())],
@@ -64,7 +64,7 @@ def test_image_does_not_depend_on_tile_size():
 def test_an_opaque_gaussian_contributes_to_its_alpha_cut_not_to_3_sigma():
   """Opacity 1: alpha = exp(-d^2 / 2) out to d = sqrt(2 ln 255) = 3.33 (so at 3.1-3.3 sigma,
   where the old 3-sigma rule cut it), and nothing beyond."""
-  cam = orbit_camera(32, 32, distance=4.0)
+  cam = orbit_camera(0.3, 0.4, width=32, height=32, distance=4.0)
   g = Gaussians(means=jnp.zeros((1, 3)), scales=jnp.full((1, 3), 0.3),
                 quats=jnp.array([[1.0, 0, 0, 0]]), opacities=jnp.ones(1),
                 sh=jnp.zeros((1, 1, 3)))
@@ -144,7 +144,8 @@ def test_running_every_loop_step_changes_nothing():
   for g, w in zip(got, want, strict=True):
     np.testing.assert_allclose(g, w, atol=1e-7)
   assert_grads_close(grads_got, grads_want, rtol=1e-6)
-  cams = jax.tree.map(lambda *x: jnp.stack(x), cam, orbit_camera(WIDTH, HEIGHT, azimuth=2.0))
+  cams = jax.tree.map(lambda *x: jnp.stack(x), cam, orbit_camera(2.0, 0.4, width=WIDTH,
+                                                                 height=HEIGHT, distance=3.5))
   images = [jax.jit(jax.vmap(lambda c, s=s: render(gaussians, c, settings=s).rgb))(cams)
             for s in (SMALL, every_step)]
   np.testing.assert_allclose(images[1], images[0], atol=1e-7)
@@ -152,7 +153,7 @@ def test_running_every_loop_step_changes_nothing():
 
 def test_3dgs_rules_on_a_stack_of_opaque_gaussians():
   """Front-to-back order, alpha clamp at 0.99, stop below transmittance 1e-4."""
-  cam = orbit_camera(16, 16, distance=4.0)
+  cam = orbit_camera(0.3, 0.4, width=16, height=16, distance=4.0)
   center, fwd = np.asarray(cam.center), np.asarray(cam.rotation)[2]
   n = 4
   colors = np.eye(3)[[0, 1, 2, 0]]
@@ -187,7 +188,7 @@ def test_gradients_match_float64_finite_differences():
   with float64():
     g = random_gaussians(40, sh_degree=2, seed=11, scale_range=(0.05, 0.3),
                          opacity_range=(0.2, 0.8), dtype=jnp.float64)
-    cam = orbit_camera(24, 20, distance=3.0)
+    cam = orbit_camera(0.3, 0.4, width=24, height=20, distance=3.0)
     cam = jax.tree.map(lambda a: jnp.asarray(a, jnp.float64), cam)
     weights = jnp.asarray(np.random.default_rng(0).normal(size=(20, 24, 5)))
 
@@ -255,7 +256,7 @@ def test_finite_outputs_and_gradients_at_extremes():
 def test_finite_for_tiny_inputs(num, width, height):
   g = random_gaussians(max(num, 1), sh_degree=0, seed=1, scale_range=(0.2, 0.5))
   g = jax.tree.map(lambda x: x[:num], g)
-  cam = orbit_camera(width, height, distance=3.0)
+  cam = orbit_camera(0.3, 0.4, width=width, height=height, distance=3.0)
   settings = RenderSettings(max_intersections=64, chunk_size=8, chunks_per_step=2)
   (value, grads) = grad_all(g, cam, settings)
   assert_finite((value, grads), f"N={num} {width}x{height}")
@@ -302,7 +303,7 @@ def test_stats_count_intersections():
 @pytest.mark.slow
 def test_jit_and_no_jit_agree():
   gaussians = random_gaussians(12, sh_degree=1, seed=7, scale_range=(0.1, 0.4))
-  cam = orbit_camera(20, 12, distance=3.0)
+  cam = orbit_camera(0.3, 0.4, width=20, height=12, distance=3.0)
   settings = RenderSettings(max_intersections=256, chunk_size=16, chunks_per_step=8)
   jitted = render(gaussians, cam, settings=settings)
   assert not bool(jitted.stats.overflow)
@@ -320,15 +321,16 @@ def test_second_call_with_same_shapes_does_not_retrace():
 
   g1 = random_gaussians(20, sh_degree=1, seed=1)
   g2 = random_gaussians(20, sh_degree=1, seed=2)
-  f(g1, orbit_camera(16, 16, azimuth=0.1))
-  f(g2, orbit_camera(16, 16, azimuth=1.3))  # new values, same shapes: no retrace
+  f(g1, orbit_camera(0.1, 0.4, width=16, height=16, distance=3.5))
+  f(g2, orbit_camera(1.3, 0.4, width=16, height=16,
+                     distance=3.5))  # new values, same shapes: no retrace
   chex.clear_trace_counter()
 
 
 @pytest.mark.slow
 def test_vmap_over_cameras_and_over_gaussians():
   g = random_gaussians(30, sh_degree=1, seed=3, scale_range=(0.05, 0.3))
-  cams = [orbit_camera(16, 12, azimuth=a) for a in (0.0, 1.0, 2.0)]
+  cams = [orbit_camera(a, 0.4, width=16, height=12, distance=3.5) for a in (0.0, 1.0, 2.0)]
   batch_cam = jax.tree.map(lambda *x: jnp.stack(x), *cams)
   fn = functools.partial(render, settings=SMALL)
   per_cam = jax.jit(jax.vmap(lambda c: fn(g, c).rgb))(batch_cam)
@@ -397,7 +399,7 @@ def test_non_finite_gaussians_are_culled_and_poison_nothing(compositor):
   n, k = 16, 5
   g = random_gaussians(n, sh_degree=1, seed=8, scale_range=(0.1, 0.4))
   g = replace(g, mask=jnp.ones(n, bool).at[0].set(False))
-  cam = orbit_camera(16, 16, distance=3.0)
+  cam = orbit_camera(0.3, 0.4, width=16, height=16, distance=3.0)
   poisoned = replace(g, means=g.means.at[0].set(jnp.nan), sh=g.sh.at[0].set(jnp.nan)
                      .at[k, 0, 1].set(jnp.nan))
   without = replace(g, mask=g.mask.at[k].set(False))
@@ -442,17 +444,20 @@ def test_masked_gaussians_change_nothing_and_get_no_gradient():
 def test_bad_gaussians_raise_clear_errors(change, message):
   g = random_gaussians(5, sh_degree=1)
   with pytest.raises(ValueError, match=message):
-    jax.jit(lambda g: render(g, orbit_camera(8, 8), settings=SMALL).rgb)(change(g))
+    jax.jit(lambda g: render(g, orbit_camera(0.3, 0.4, width=8, height=8, distance=3.5),
+                             settings=SMALL).rgb)(change(g))
 
 
 def test_bad_settings_and_cameras_raise():
   with pytest.raises(ValueError, match="multiple"):
     RenderSettings(max_intersections=100, chunk_size=32)
   with pytest.raises(ValueError, match="width"):
-    orbit_camera(0, 8)
+    orbit_camera(0.3, 0.4, width=0, height=8, distance=3.5)
   g = random_gaussians(5)
-  batch = jax.tree.map(lambda *x: jnp.stack(x), orbit_camera(8, 8), orbit_camera(8, 8))
+  one = orbit_camera(0.3, 0.4, width=8, height=8, distance=3.5)
+  batch = jax.tree.map(lambda *x: jnp.stack(x), one, one)
   with pytest.raises(ValueError, match="vmap"):
     render(g, batch, settings=SMALL)
   with pytest.raises(ValueError, match="features"):
-    render(g, orbit_camera(8, 8), features=jnp.ones((4, 2)), settings=SMALL)
+    render(g, orbit_camera(0.3, 0.4, width=8, height=8, distance=3.5), features=jnp.ones((4, 2)),
+           settings=SMALL)

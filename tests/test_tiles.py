@@ -4,10 +4,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from mfsample import RenderSettings
+from mfsample import RenderSettings, orbit_camera
 from mfsample.renderer import projection, tiles
 from mfsample.renderer.tiles import tile_grid
-from mfsample.testing import orbit_camera, random_gaussians
+from mfsample.testing import random_gaussians
 
 W, H = 70, 50
 project_gaussians = jax.jit(projection.project_gaussians, static_argnums=(6,))
@@ -16,7 +16,7 @@ intersect_tiles = jax.jit(tiles.intersect_tiles, static_argnums=(1, 2, 3))
 
 def _layout(settings, num=150):
   g = random_gaussians(num, seed=3, scale_range=(0.01, 0.2))
-  cam = orbit_camera(W, H, distance=2.5, fov_x=1.0)
+  cam = orbit_camera(0.3, 0.4, width=W, height=H, distance=2.5, fov_x=1.0)
   proj = project_gaussians(g.means, g.scales, g.quats, g.opacities, None, cam, settings)
   return proj, intersect_tiles(proj, W, H, settings)
 
@@ -105,7 +105,7 @@ def test_searchsorted_methods_give_the_same_layout():
 def test_no_valid_gaussians_gives_an_empty_layout():
   settings = RenderSettings(max_intersections=256, chunk_size=8, chunks_per_step=4)
   g = random_gaussians(10, seed=0)
-  cam = orbit_camera(W, H)
+  cam = orbit_camera(0.3, 0.4, width=W, height=H, distance=3.5)
   proj = project_gaussians(g.means, g.scales, g.quats, g.opacities, jnp.zeros(10, bool), cam,
                            settings)
   layout = intersect_tiles(proj, W, H, settings)

@@ -10,19 +10,19 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from conftest import tiny_config
+from conftest import tiny_config, tiny_start, train_with
 
-from mfsample import samplers
+from mfsample import config_blocks, samplers
 from mfsample._json import without_fields
 from mfsample.data import datasets as data_lib
 from mfsample.data.ply import load_ply
+from mfsample.model import sample
 from mfsample.renderer import render
 from mfsample.train import checkpoint as ckpt
 from mfsample.train import densify as densify_lib
 from mfsample.train import evaluate as eval_lib
 from mfsample.train import loop, losses
 from mfsample.train import step as step_lib
-from mfsample.train.config import SPEED_ONLY_FIELDS
 from mfsample.train.experiment import train_and_evaluate
 from mfsample.train.step import make_train_step
 
@@ -35,16 +35,15 @@ class Run:
   def __init__(self, config, dataset, max_traces=None):
     self.config = config
     self.views = data_lib.to_device(dataset.train)
-    self.setup = loop.make_setup(config, dataset.train)
-    self.state0 = loop.init_state(config, self.setup, dataset.bounds)
+    self.plan, model = tiny_start(config, dataset)
+    self.setup = loop.make_setup(self.plan.settings, model, seed=int(config.seed),
+                                 extent=self.plan.extent, num_views=len(self.views))
+    self.state0 = loop.init_state(model, self.setup)
     self.fn = make_train_step(self.setup.step_config, max_traces=max_traces)
 
   def step(self, state):
-    i = int(state.step)
-    m = self.setup.step_config.num_samples
-    view = jnp.int32(loop.view_for_step(self.setup.seed, i, len(self.views)))
-    return self.fn(state, (self.views.images, self.views.cameras), view,
-                   self.setup.sobol[i * m:(i + 1) * m])
+    return self.fn(state, (self.views.images, self.views.cameras),
+                   *loop.step_targets(self.setup, int(state.step), len(self.views)))
 
 
 @pytest.fixture(scope="module")
@@ -75,12 +74,12 @@ def test_one_training_step_per_sampler(runs, kind):
     old = np.asarray(run.state0.model.params.mean[g])
     assert not np.array_equal(np.asarray(new)[live], old[live]), g
   if kind == "deterministic":
-    assert state.model.params.spread == {}
+    assert state.model.params.b_hat == {}
   else:
-    for g, new in state.model.params.spread.items():
+    for g, new in state.model.params.b_hat.items():
       new = np.asarray(new)
-      assert not np.array_equal(new[live], np.asarray(run.state0.model.params.spread[g])[live])
-      assert new.min() >= 0.0 and new.max() <= run.setup.spec.bound(g)
+      assert not np.array_equal(new[live], np.asarray(run.state0.model.params.b_hat[g])[live])
+      assert new.min() >= 0.0 and new.max() <= run.plan.spec.bound(g)
   chex.assert_tree_all_finite(state)
 
 
@@ -125,15 +124,15 @@ def test_padding_never_changes_a_render_nor_receives_updates(runs):
   mean["opacity_logits"] = wild(mean["opacity_logits"], 10.0)
   mean["log_scales"] = wild(mean["log_scales"], 0.0)
   mean["sh_dc"] = wild(mean["sh_dc"], 3.0)
-  spread = {g: wild(v, 0.3) for g, v in model.params.spread.items()}
+  spread = {g: wild(v, 0.3) for g, v in model.params.b_hat.items()}
   signs = {g: wild(v, 1) for g, v in model.signs.items()}
-  wild_model = model.replace(params=model.params._replace(mean=mean, spread=spread),
+  wild_model = model.replace(params=model.params._replace(mean=mean, b_hat=spread),
                              signs=signs)
   camera = run.views.cameras[0]
   z = jnp.asarray(samplers.sobol_z(1, 2, seed=0)[0])
   settings = run.setup.step_config.settings
-  ref = render(samplers.sample(model, z), camera, settings=settings)
-  out = render(samplers.sample(wild_model, z), camera, settings=settings)
+  ref = render(sample(model, z), camera, settings=settings)
+  out = render(sample(wild_model, z), camera, settings=settings)
   np.testing.assert_array_equal(np.asarray(out.rgb), np.asarray(ref.rgb))
 
   wild_state = state._replace(model=wild_model)
@@ -188,9 +187,9 @@ def test_densification_keeps_parameters_and_optimizer_state_aligned(runs):
     np.testing.assert_allclose(mu[:kept], p[:kept] + 1.0, rtol=1e-6)  # moved together
     np.testing.assert_allclose(nu[:kept], 2.0 * p[:kept], rtol=1e-6)
     assert not np.any(mu[kept:]) and not np.any(nu[kept:])  # new rows: fresh moments
-  for g, s in nm.params.spread.items():
+  for g, s in nm.params.b_hat.items():
     s = np.asarray(s)
-    np.testing.assert_allclose(np.asarray(adam.mu.spread[g])[:kept], s[:kept] + 1.0, rtol=1e-6)
+    np.testing.assert_allclose(np.asarray(adam.mu.b_hat[g])[:kept], s[:kept] + 1.0, rtol=1e-6)
     fresh = s[kept:live]
     assert fresh.min() >= 0.0 and fresh.max() <= run.setup.init_scales[g]  # small, not copies
     assert set(np.unique(np.asarray(nm.signs[g])[:live])) <= {-1, 1}
@@ -243,9 +242,9 @@ def test_step_finite_at_the_extremes(tiny_dataset, kind, rank):
   state = run.state0
   model = state.model
   spread = {g: jnp.where(model.mask.reshape((-1,) + (1,) * (v.ndim - 1)),
-                         jnp.full_like(v, run.setup.spec.bound(g)), 0.0)
-            for g, v in model.params.spread.items()}
-  state = state._replace(model=model.replace(params=model.params._replace(spread=spread)))
+                         jnp.full_like(v, run.plan.spec.bound(g)), 0.0)
+            for g, v in model.params.b_hat.items()}
+  state = state._replace(model=model.replace(params=model.params._replace(b_hat=spread)))
   for _ in range(2):
     state, metrics = run.step(state)
     assert np.isfinite(float(metrics.loss))
@@ -271,13 +270,13 @@ def resume_config():
 @pytest.mark.slow
 def test_resumed_run_matches_an_uninterrupted_one(tiny_dataset, tmp_path):
   config = resume_config()
-  straight = loop.train(config, tiny_dataset.train, bounds=tiny_dataset.bounds)
+  straight = train_with(config, tiny_dataset)
   assert straight.setup.step_config.settings.max_intersections > 512  # the budget grew
   assert any("densify" in e for e in straight.history)
 
   workdir = str(tmp_path / "run")
-  killed = loop.train(config, tiny_dataset.train, bounds=tiny_dataset.bounds,
-                      checkpoint_dir=os.path.join(workdir, "checkpoints"), stop_at=11)
+  killed = train_with(config, tiny_dataset, checkpoint_dir=os.path.join(workdir, "checkpoints"),
+                      checkpoint_every=8, stop_at=11)
   assert int(killed.state.step) == 11  # "killed" at 11: steps 9-11 are lost, 1-8 saved
   assert [os.path.basename(p) for p in ckpt.list_checkpoints(
       os.path.join(workdir, "checkpoints"))] == ["ckpt_00000008.npz"]
@@ -317,21 +316,20 @@ def test_chunks_per_step_changes_speed_not_training(tiny_dataset, tmp_path):
   base = resume_config()  # a budget (512) that must grow, and a checkpoint at step 8
   wide = resume_config()
   wide.render.chunks_per_step = 64  # 2048 pairs a step: the 512 start is rounded up
-  assert loop.render_settings(wide.render).max_intersections == 2048
-  a = loop.train(base, tiny_dataset.train, bounds=tiny_dataset.bounds)
+  assert config_blocks.render_settings(wide.render).max_intersections == 2048
+  a = train_with(base, tiny_dataset)
   directory = str(tmp_path / "checkpoints")
-  loop.train(base, tiny_dataset.train, bounds=tiny_dataset.bounds, checkpoint_dir=directory,
+  train_with(base, tiny_dataset, checkpoint_dir=directory, checkpoint_every=8,
              stop_at=11)  # its checkpoint (step 8) holds a budget of 16-chunk steps
-  b = loop.train(wide, tiny_dataset.train, bounds=tiny_dataset.bounds,
-                 checkpoint_dir=directory)
+  b = train_with(wide, tiny_dataset, checkpoint_dir=directory, checkpoint_every=8)
   assert b.setup.step_config.settings.chunks_per_step == 64
   assert b.setup.step_config.settings.max_intersections % (32 * 64) == 0
   for x, y in zip(jax.tree.leaves(a.state), jax.tree.leaves(b.state), strict=True):
     np.testing.assert_allclose(np.asarray(x), np.asarray(y), rtol=1e-3, atol=1e-4)
   as_json = lambda c: json.loads(c.to_json_best_effort())
   assert as_json(base) != as_json(wide)
-  assert (without_fields(as_json(base), SPEED_ONLY_FIELDS)
-          == without_fields(as_json(wide), SPEED_ONLY_FIELDS))
+  assert (without_fields(as_json(base), config_blocks.SPEED_ONLY_RENDER_FIELDS)
+          == without_fields(as_json(wide), config_blocks.SPEED_ONLY_RENDER_FIELDS))
 
 
 @pytest.mark.slow
@@ -348,7 +346,7 @@ def test_two_samples_per_step(tiny_dataset):
   camera, image = run.views.cameras[view], run.views.images[view]
   cfg = run.setup.step_config
   per_sample = [float(losses.photometric(
-      render(samplers.sample(model, jnp.asarray(z)), camera,
+      render(sample(model, jnp.asarray(z)), camera,
              background=jnp.asarray(cfg.background), settings=cfg.settings).rgb, image))
       for z in run.setup.sobol[:2]]
   assert per_sample[0] != per_sample[1]
@@ -383,18 +381,19 @@ def test_saving_no_images_writes_nothing(tiny_dataset, tmp_path):
 def test_a_batch_takes_the_views_and_rows_of_consecutive_single_view_steps(runs):
   """Step t of a batch of B uses the views and Sobol rows of a B = 1 run's steps
   tB .. tB + B - 1; B = 1 is the B = 1 run's pick itself."""
-  seed, n = 0, 12
-  assert int(loop.views_for_step(seed, 5, n, 1)) == loop.view_for_step(seed, 5, n)
-  np.testing.assert_array_equal(loop.views_for_step(seed, 5, n, 3),
-                                [loop.view_for_step(seed, p, n) for p in (15, 16, 17)])
-  config = tiny_config("lowrank", **{"train.batch_size": 3, "sampler.num_samples": 2})
-  setup = loop.make_setup(config, runs["lowrank"].views)
+  run, n = runs["lowrank"], 12
+  one = run.setup
+  index, rows = loop.step_targets(one, 5, n)
+  assert index.tolist() == [loop.view_for_step(one.seed, 5, n)] and rows.shape == (1, 1, 2)
+  settings = run.plan.settings.replace(batch_size=3, num_samples=2)
+  setup = loop.make_setup(settings, run.state0.model, seed=one.seed, extent=one.extent,
+                          num_views=n)
   assert setup.sobol.shape == (40 * 3 * 2, 2)  # steps x B x M rows of k = 2
-  rows = loop.step_sobol(setup, 5)
+  index, rows = loop.step_targets(setup, 5, n)
+  np.testing.assert_array_equal(index, [loop.view_for_step(one.seed, p, n) for p in (15, 16, 17)])
   np.testing.assert_array_equal(rows, setup.sobol[30:36].reshape(3, 2, 2))
   assert setup.step_config.batch_size == 3 and setup.step_config.num_devices == 1
-  one = runs["lowrank"].setup
-  assert one.step_config.num_devices == 1 and loop.step_sobol(one, 5).shape == (1, 2)
+  assert one.step_config.num_devices == 1
 
 
 @pytest.mark.slow
@@ -419,7 +418,7 @@ def test_batch_gradients_are_the_mean_of_the_views_and_stats_those_of_consecutiv
 
   def view_loss(params, view, z):
     m = model.replace(params=params)
-    out = render(samplers.sample(m, z), run.views.cameras[view], background=background,
+    out = render(sample(m, z), run.views.cameras[view], background=background,
                  settings=settings)
     return losses.photometric(out.rgb, run.views.images[view], cfg.ssim_weight)
 
@@ -434,8 +433,8 @@ def test_batch_gradients_are_the_mean_of_the_views_and_stats_those_of_consecutiv
     assert np.max(np.abs(got - want)) <= 1e-5 * np.max(np.abs(want))
 
   # Two single-view steps from the same state: what each adds to the statistics.
-  singles = [run.fn(state, data, jnp.int32(v), rows[i:i + 1])[0].stats
-             for i, v in enumerate(views)]
+  singles = [run.fn(state, data, jnp.asarray([v], jnp.int32), rows[i:i + 1].reshape(1, 1, -1))
+             [0].stats for i, v in enumerate(views)]
   np.testing.assert_array_equal(batch.stats.count, singles[0].count + singles[1].count)
   np.testing.assert_array_equal(batch.stats.max_radii,
                                 np.maximum(singles[0].max_radii, singles[1].max_radii))

@@ -14,8 +14,9 @@ from conftest import float64
 from planning_testlib import opposite_uv, random_model, sphere_for, tiny_pool, trained_one_view
 
 from mfsample import RenderSettings
-from mfsample import uncertainty as unc
+from mfsample import view_uncertainty as unc
 from mfsample.planning import poses
+from mfsample.samplers import sample_z
 
 SETTINGS = RenderSettings(max_intersections=1 << 12)
 SPHERE = poses.SphereSpec(radius=3.0, v_range=(0.05, 0.95), width=20, height=16)
@@ -36,7 +37,7 @@ def test_pixel_variance_is_the_biased_sample_variance_summed_over_rgb():
 @pytest.mark.slow
 def test_two_samples_give_quarter_squared_difference(model):
   # With M = 2, (1/2) sum_m ||C_m - C_mean||^2 = ||C_1 - C_2||^2 / 4 per pixel.
-  z = unc.uncertainty_z(model, 2)
+  z = sample_z(model, 2)
   cam = poses.spherical_camera(UV, SPHERE)
   out = unc.uncertainty(model, cam, z, settings=SETTINGS)
   assert not np.any(out.stats.overflow)
@@ -52,7 +53,7 @@ def test_two_samples_give_quarter_squared_difference(model):
 
 def test_deterministic_model_has_zero_uncertainty():
   det = random_model("deterministic")
-  z = unc.uncertainty_z(det, 4)
+  z = sample_z(det, 4)
   assert z.shape == (4, 0)
   out = unc.uncertainty(det, poses.spherical_camera(UV, SPHERE), z, settings=SETTINGS)
   assert float(out.value) == 0.0
@@ -60,7 +61,7 @@ def test_deterministic_model_has_zero_uncertainty():
 
 
 def test_sobol_samples_are_the_first_scrambled_points(model):
-  z = np.asarray(unc.uncertainty_z(model, 2, seed=6174))
+  z = np.asarray(sample_z(model, 2, seed=6174))
   assert z.shape == (2, 2) and np.all(np.abs(z) <= 1.0)
   # The first two points of a scrambled Sobol sequence sit in opposite halves per axis.
   assert np.all(np.sign(z[0]) != np.sign(z[1]))
@@ -73,8 +74,8 @@ def test_gradient_wrt_camera_matches_finite_differences():
   # discontinuities in the pose (two Gaussians swapping depth order, a footprint crossing
   # its cut-off), and steps of 1e-6 .. 1e-3 cross some of them.
   with float64():
-    m = random_model("lowrank", dtype=jnp.float64, num=40, spread=0.05, seed=3)
-    z = unc.uncertainty_z(m, 2)
+    m = random_model("lowrank", dtype=jnp.float64, num=40, b_hat=0.05, seed=3)
+    z = sample_z(m, 2)
     sphere = SPHERE.replace(width=16, height=12)
     settings = RenderSettings(max_intersections=1 << 12)
 
@@ -96,7 +97,7 @@ def test_gradient_wrt_camera_matches_finite_differences():
 def test_one_training_view_opposite_view_is_more_uncertain():
   pool = tiny_pool()
   trained = trained_one_view("lowrank", view=0)
-  z = unc.uncertainty_z(trained.model, 2, seed=6174)
+  z = sample_z(trained.model, 2, seed=6174)
   sphere = sphere_for(pool)
   uv_train = poses.camera_to_uv(pool.candidates.cameras[0])
   cams = poses.spherical_camera(jnp.asarray(np.stack([uv_train, opposite_uv(uv_train)]),
@@ -109,7 +110,7 @@ def test_one_training_view_opposite_view_is_more_uncertain():
 
 @pytest.mark.slow
 def test_scores_match_single_camera_calls_for_any_chunk_size(model):
-  z = unc.uncertainty_z(model, 2)
+  z = sample_z(model, 2)
   uv = np.random.default_rng(1).uniform([0.0, 0.1], [1.0, 0.5], (5, 2)).astype(np.float32)
   cams = poses.spherical_camera(uv, SPHERE)
   single = [float(unc.uncertainty(model, cams[i], z, settings=SETTINGS).value)
@@ -123,7 +124,7 @@ def test_scores_match_single_camera_calls_for_any_chunk_size(model):
 
 @pytest.mark.slow
 def test_scoring_grows_the_budget_instead_of_truncating(model):
-  z = unc.uncertainty_z(model, 2)
+  z = sample_z(model, 2)
   cams = poses.spherical_camera(jnp.asarray([UV, UV + 0.2]), SPHERE)
   tight = RenderSettings(max_intersections=32, chunk_size=8, chunks_per_step=4)
   out, grown = unc.score_cameras(model, cams, z, settings=tight)
@@ -133,7 +134,7 @@ def test_scoring_grows_the_budget_instead_of_truncating(model):
 
 
 def test_scoring_does_not_retrace(model):
-  z = unc.uncertainty_z(model, 2)
+  z = sample_z(model, 2)
   cams = poses.spherical_camera(jnp.asarray([UV, UV + 0.1, UV + 0.2]), SPHERE)
   counted = chex.assert_max_traces(unc.uncertainty_of_samples, n=1)
   fn = jax.jit(lambda g, c: counted(g, c, settings=SETTINGS, background=jnp.zeros(3)).value)
@@ -145,11 +146,12 @@ def test_scoring_does_not_retrace(model):
 _SHARDED = textwrap.dedent("""
     import jax, jax.numpy as jnp, numpy as np
     assert jax.device_count() == 4, jax.devices()
-    from mfsample import RenderSettings, uncertainty as unc
+    from mfsample import RenderSettings, view_uncertainty as unc
     from mfsample.planning import poses
+    from mfsample.samplers import sample_z
     from planning_testlib import random_model
     m = random_model("lowrank", num=40)
-    z = unc.uncertainty_z(m, 2)
+    z = sample_z(m, 2)
     sphere = poses.SphereSpec(radius=3.0, width=16, height=16)
     uv = np.random.default_rng(0).uniform([0, 0.1], [1, 0.5], (6, 2)).astype(np.float32)
     cams = poses.spherical_camera(uv, sphere)
@@ -162,7 +164,7 @@ _SHARDED = textwrap.dedent("""
     assert default_num_devices(6) == 4 and default_num_devices(2) == 4
     assert default_num_devices(1) == 1
     # The M samples of one camera split over devices (M = 3 padded to 4).
-    z3 = unc.uncertainty_z(m, 3)
+    z3 = sample_z(m, 3)
     a = unc.uncertainty(m, cams[0], z3, settings=s, num_devices=1)
     b = unc.uncertainty(m, cams[0], z3, settings=s, num_devices=4)
     np.testing.assert_allclose(np.asarray(b.pixel_map), np.asarray(a.pixel_map), rtol=1e-5,

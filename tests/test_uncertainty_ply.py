@@ -8,12 +8,13 @@ import pytest
 from planning_testlib import tiny_pool, trained_one_view
 
 from mfsample import render
-from mfsample import uncertainty as unc
+from mfsample import view_uncertainty as unc
 from mfsample.data.ply import load_ply, read_vertex_table
 from mfsample.gaussian_uncertainty import gaussian_uncertainty
 from mfsample.metrics import spearman
 from mfsample.model import activate
-from mfsample.next_views.uncertainty_ply import write_uncertainty_plys
+from mfsample.samplers import sample_z
+from mfsample.your_data.uncertainty_ply import write_uncertainty_plys
 
 
 @pytest.fixture(scope="module")
@@ -26,7 +27,7 @@ def written(tmp_path_factory):
   centers = np.asarray(pool.candidates.cameras.center)
   target = int(np.argmax(np.linalg.norm(centers - centers[0], axis=1)))
   others = [i for i in range(1, len(centers)) if i != target]
-  z = unc.uncertainty_z(model, 8)
+  z = sample_z(model, 8)
   bg = jnp.asarray(pool.background, jnp.float32)
   per = gaussian_uncertainty(model, pool.candidates.cameras[np.asarray(others)], z,
                              settings=trained.settings, background=bg)

@@ -16,8 +16,9 @@ import numpy as np
 import pytest
 from planning_testlib import random_model, tiny_config, tiny_pool
 
-from mfsample import workdir as workdir_lib
+from mfsample import config_record
 from mfsample.planning import rounds, strategies
+from mfsample.planning.config import strategy_settings
 from mfsample.planning.pool import stack_cameras
 from mfsample.train import checkpoint as ckpt
 from mfsample.viewer import app, models
@@ -43,13 +44,23 @@ def test_a_folder_without_a_run_is_refused(tmp_path):
 def test_a_run_of_an_unknown_kind_is_refused(tmp_path):
   from configs import train
 
-  workdir_lib.write_config(train.get_config("tiny"), str(tmp_path))  # experiments/train.py's
-  with pytest.raises(RunError, match="a run of an unknown kind.*camera planning"):
+  config_record.write_config(train.get_config("tiny"), str(tmp_path),
+                           {"job": "training"})  # experiments/train.py's
+  with pytest.raises(RunError, match="of the 'training' job, which the viewer does not show"
+                                     ".*camera planning"):
+    open_run(tmp_path)
+  config_record.write_config(train.get_config("tiny"), str(tmp_path))  # who wrote it: unknown
+  with pytest.raises(RunError, match="does not record which job wrote"):
     open_run(tmp_path)
 
 
+def _planning_config(config, workdir):
+  """`config.json` of a camera-planning workdir, as the job writes it."""
+  config_record.write_config(config, str(workdir), {"job": "camera_planning"})
+
+
 def test_a_port_in_use_is_refused_by_name(tmp_path):
-  workdir_lib.write_config(tiny_config(), str(tmp_path))
+  _planning_config(tiny_config(), tmp_path)
   with socket.socket() as taken:
     taken.bind(("127.0.0.1", 0))
     taken.listen()
@@ -68,7 +79,7 @@ def test_the_command_says_what_is_wrong_without_a_traceback(tmp_path):
   empty = _command(f"--workdir={tmp_path}")
   assert empty.returncode == 1 and "Traceback" not in empty.stderr
   assert f"error: {tmp_path} holds no run" in empty.stderr
-  workdir_lib.write_config(tiny_config(), str(tmp_path))
+  _planning_config(tiny_config(), tmp_path)
   with socket.socket() as taken:
     taken.bind(("127.0.0.1", 0))
     taken.listen()
@@ -83,10 +94,12 @@ def test_the_command_says_what_is_wrong_without_a_traceback(tmp_path):
 
 def test_a_saved_model_reads_back_as_it_was(tmp_path):
   model = random_model(num=20)
-  path = ckpt.save_checkpoint(str(tmp_path), model, {"step": 1})
-  read = models.read_model(path, "lowrank")
+  path = ckpt.save_checkpoint(str(tmp_path), model,
+                              {"step": 1, "sampler": model.spec.to_dict()})
+  read = models.read_model(path)
+  assert read.spec == model.spec  # as recorded: kind, rank, groups, bounds, z source
   assert read.spec.kind == "lowrank" and read.spec.rank == 2
-  assert set(read.spec.groups) == set(model.params.spread)
+  assert set(model.params.b_hat) <= set(read.spec.groups)
   for a, b in zip(jax.tree.leaves(model), jax.tree.leaves(read), strict=True):
     np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
   centres, cov, rgb, opacity = models.splats(read, eye=np.array([0.0, -3.0, 0.0]))
@@ -97,6 +110,8 @@ def test_a_saved_model_reads_back_as_it_was(tmp_path):
   assert rgb.min() >= 0 and rgb.max() <= 1 and opacity.shape == (live.sum(), 1)
   with pytest.raises(models.ModelFileError, match="holds no model"):
     models.read_model(ckpt.save_checkpoint(str(tmp_path / "empty"), {}, {"step": 1}))
+  with pytest.raises(models.ModelFileError, match="does not record the sampler"):
+    models.read_model(ckpt.save_checkpoint(str(tmp_path / "old"), model, {"step": 1}))
 
 
 def _round(workdir, strategy, pool, model, views):
@@ -119,9 +134,9 @@ def planning_workdir(tmp_path_factory):
   workdir = tmp_path_factory.mktemp("planning")
   config = tiny_config()
   config.strategies = ("ours_sel",)
-  workdir_lib.write_config(config, str(workdir))
+  _planning_config(config, workdir)
   pool, model = tiny_pool(), random_model(num=80)
-  strategy = strategies.make_strategy("ours_sel", config)
+  strategy = strategies.make_strategy("ours_sel", strategy_settings(config))
   choice = _round(workdir, strategy, pool, model, [0])
   return workdir, strategy, pool, model, choice
 
@@ -133,9 +148,9 @@ def test_a_round_records_the_scores_the_choice_and_the_model(planning_workdir):
   meta = ckpt.read_meta(path)
   assert meta["step"] == 1 and meta["train"] == [0] and meta["chosen"]["index"] == choice.index
   np.testing.assert_allclose(meta["scores"], choice.info["scores"])
-  assert meta["model"] == {"sampler": "lowrank"}
+  assert meta["model"] == {"sampler": model.spec.to_dict()}
   read = models.read_model(path)
-  np.testing.assert_array_equal(read.params.spread["means"], model.params.spread["means"])
+  np.testing.assert_array_equal(read.params.b_hat["means"], model.params.b_hat["means"])
   with np.load(os.path.join(workdir, "rounds", "candidates.npz")) as data:
     np.testing.assert_allclose(data["world_to_camera"], pool.candidates.cameras.world_to_camera)
   (step,) = open_run(workdir).steps()

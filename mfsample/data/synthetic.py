@@ -11,6 +11,8 @@ Two scenes serve tests, the tiny variants of every experiment and the notebooks:
 `render_views` renders any Gaussians into ground-truth `Views` (colour, alpha, depth).
 """
 
+import dataclasses
+
 import jax.numpy as jnp
 import numpy as np
 
@@ -103,3 +105,21 @@ def render_views(gaussians, cameras, background, settings=None, names=None):
   names = tuple(names) if names else tuple(f"view_{i:03d}" for i in range(len(cameras)))
   return Views(jnp.clip(jnp.stack(images), 0.0, 1.0), cameras, jnp.stack(alphas),
                jnp.stack(depths), names)
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Oracle:
+  """The ground truth of any camera: `oracle(camera)` -> [H, W, 3] image in [0, 1] (numpy).
+
+  Holds no state: every call starts from `settings`' budget and grows it where the render
+  needs more (`render_with_budget`), so a call never depends on the calls before it.
+  """
+
+  truth: Gaussians
+  background: tuple
+  settings: RenderSettings = RenderSettings(max_intersections=1 << 12)
+
+  def __call__(self, camera):
+    out, _ = render_with_budget(render, self.settings, self.truth, camera,
+                                background=jnp.asarray(self.background, jnp.float32))
+    return np.asarray(jnp.clip(out.rgb, 0.0, 1.0))

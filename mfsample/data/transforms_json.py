@@ -20,7 +20,6 @@ import numpy as np
 
 from mfsample.data import _io
 
-INTRINSIC_KEYS = ("fl_x", "fl_y", "cx", "cy", "w", "h", "camera_angle_x", "camera_angle_y")
 DISTORTION_KEYS = ("k1", "k2", "k3", "k4", "p1", "p2")
 # nerfstudio's perspective camera models (its others: OPENCV_FISHEYE, EQUIRECTANGULAR, ...).
 PERSPECTIVE_MODELS = ("SIMPLE_PINHOLE", "PINHOLE", "SIMPLE_RADIAL", "RADIAL", "OPENCV")

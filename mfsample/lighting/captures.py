@@ -3,14 +3,16 @@
 The cameras are fixed; the lights change. The oracle renders, once per camera, the image
 under each SH basis function Y_b alone (I_b, signed linear radiance); the capture under any
 light xi is then sum_b xi_b I_b (`capture`), exact by the linearity of light transport, so a
-new light costs no rendering. Two sources:
+new light costs no rendering. The data kinds that offer lights (`mfsample.data.DATA_KINDS`)
+make their `LightData` here:
 
-* "scene": a built-in Mitsuba scene (`mfsample.scenes.capture_sh_basis`, cached on disk per
-  camera); training cameras `scene.candidate_cameras`, test cameras `scene.test_cameras`.
-* "synthetic": random ground-truth Gaussians on a sphere (an opaque shell) with a diffuse
-  (Lambertian) transfer about each Gaussian's outward normal, rendered by `mfsample.render`
-  (tests and the notebook: no files, no Mitsuba). Being diffuse, it has m = 1 exactly;
-  shadowing is not modelled.
+* "scene": a built-in Mitsuba scene (`scene_light_data`: `mfsample.scenes.capture_sh_basis`,
+  cached on disk per camera); training cameras `scene.candidate_cameras`, test cameras
+  `scene.test_cameras`.
+* "synthetic": random ground-truth Gaussians (an opaque shell) with a diffuse (Lambertian)
+  transfer about each Gaussian's outward normal, rendered by `mfsample.render`
+  (`synthetic_light_data`: tests and the notebook, no files, no Mitsuba). Being diffuse, it
+  has m = 1 exactly; shadowing is not modelled.
 
 The background is black (radiance 0), as the oracle's SH captures are.
 """
@@ -80,30 +82,24 @@ def _check_basis(basis):
   return basis
 
 
-def make_light_data(cfg, light_coeffs) -> LightData:
-  """The `LightData` of the `data` block of a light-planning config (`LIGHT_DATA_KINDS`)."""
-  if cfg.kind not in LIGHT_DATA_KINDS:
-    raise ValueError(f"config.data.kind must be one of {', '.join(map(repr, LIGHT_DATA_KINDS))}"
-                     f", got {cfg.kind!r}")
-  return LIGHT_DATA_KINDS[cfg.kind](cfg, light_coeffs)
-
-
-def _scene_data(cfg, n):
+def scene_light_data(spec, n) -> LightData:
+  """The `LightData` of a built-in Mitsuba scene (`DataSpec` of kind "scene"): SH basis
+  captures of degree sqrt(n) - 1 at its candidate and test cameras (cached per camera)."""
   import tqdm
 
   from mfsample import scenes
   from mfsample.data import resolve_path
 
-  scene = scenes.get_scene(cfg.scene)
-  w, h = int(cfg.width), int(cfg.height)
-  train = scene.candidate_cameras(w, h, num=int(cfg.num_train), seed=int(cfg.camera_seed))
-  test = scene.test_cameras(w, h, num=int(cfg.num_test), seed=int(cfg.camera_seed) + 1)
-  cache = str(resolve_path(cfg.cache_dir)) if cfg.get("cache_dir") else None
+  scene = scenes.get_scene(spec.scene)
+  w, h = spec.width, spec.height
+  train = scene.candidate_cameras(w, h, num=spec.num_train, seed=spec.camera_seed)
+  test = scene.test_cameras(w, h, num=spec.num_test, seed=spec.camera_seed + 1)
+  cache = str(resolve_path(spec.cache_dir)) if spec.cache_dir else None
   degree = lights_lib.degree_of(n)
   cams = [(train, i) for i in range(len(train))] + [(test, i) for i in range(len(test))]
   bar = tqdm.tqdm(cams, desc=f"SH basis captures of {scene.name}", unit="view",
-                  disable=not cfg.progress)
-  images = [scenes.capture_sh_basis(scene, c[i], degree=degree, spp=int(cfg.spp),
+                  disable=not spec.progress)
+  images = [scenes.capture_sh_basis(scene, c[i], degree=degree, spp=spec.spp,
                                     cache_dir=cache) for c, i in bar]
   c, r = np.asarray(scene.center, np.float64), float(scene.radius)
   return LightData(scene.name, train, test, np.stack(images[:len(train)]),
@@ -115,14 +111,11 @@ def _scene_data(cfg, n):
 _LAMBERT_BANDS = (math.pi, 2.0 * math.pi / 3.0, math.pi / 4.0, 0.0)
 
 
-def synthetic_truth(cfg, n):
-  """(`Gaussians`, [N, n, 3] per-Gaussian radiance under each basis light) of the synthetic
-  diffuse scene: a shell of opaque Gaussians, albedo uniform in [0.1, 0.9]."""
-  from mfsample.data.synthetic import synthetic_scene
-
-  s = cfg.synthetic
-  truth = synthetic_scene(int(s.num_gaussians), int(s.seed), radius=float(s.radius))
-  rng = np.random.default_rng([int(s.seed), 39])
+def diffuse_radiance(truth, seed, n):
+  """[N, n, 3] per-Gaussian radiance under each basis light of the ground truth `truth`
+  (`Gaussians`) made diffuse: albedo uniform in [0.1, 0.9] (seeded by `seed`), Lambertian
+  transfer about each Gaussian's outward normal (from the origin)."""
+  rng = np.random.default_rng([int(seed), 39])
   albedo = rng.uniform(0.1, 0.9, (truth.num_gaussians, 3))
   normals = np.asarray(truth.means, np.float64)
   normals /= np.linalg.norm(normals, axis=-1, keepdims=True)
@@ -130,42 +123,27 @@ def synthetic_truth(cfg, n):
   bands = np.floor(np.sqrt(np.arange(n)) + 1e-6).astype(int)
   y = np.asarray(sh_lib.sh_basis(jnp.asarray(normals, jnp.float32), degree), np.float64)
   per_light = y * np.asarray(_LAMBERT_BANDS)[bands] / math.pi  # [N, n]
-  return truth, jnp.asarray(per_light[:, :, None] * albedo[:, None, :], jnp.float32)
+  return jnp.asarray(per_light[:, :, None] * albedo[:, None, :], jnp.float32)
 
 
-def _synthetic_data(cfg, n):
-  from mfsample.planning import poses
+def synthetic_light_data(truth, seed, train_cameras, test_cameras, n, *, bounds) -> LightData:
+  """The `LightData` of synthetic ground-truth Gaussians `truth` made diffuse
+  (`diffuse_radiance`), rendered by mfsample at the training and test cameras."""
+  per_light = diffuse_radiance(truth, seed, n)
+  settings = RenderSettings(max_intersections=1 << 12)
 
-  s = cfg.synthetic
-  truth, per_light = synthetic_truth(cfg, n)
-  sphere = poses.SphereSpec(radius=float(s.distance), v_range=tuple(s.v_range),
-                            fov_x=math.radians(float(s.fov_x_deg)), width=int(cfg.width),
-                            height=int(cfg.height))
-  state = {"settings": RenderSettings(max_intersections=1 << 12)}
-
-  def basis_images(cameras):
+  def basis_images(cameras, settings):
     out = []  # diffuse: the radiance features do not depend on the view direction
     for i in range(len(cameras)):
       cam = cameras[i]
-      res, state["settings"] = render_with_budget(
-          render, state["settings"], truth, cam,
-          features=per_light.reshape(per_light.shape[0], n * 3))
+      res, settings = render_with_budget(
+          render, settings, truth, cam, features=per_light.reshape(per_light.shape[0], n * 3))
       out.append(np.asarray(res.rgb).reshape(cam.height, cam.width, n, 3))
-    return np.moveaxis(np.stack(out), 3, 1)
+    return np.moveaxis(np.stack(out), 3, 1), settings
 
-  def cameras(num, stream):
-    uv = poses.random_uv(np.random.default_rng([int(cfg.camera_seed), stream]), num, sphere)
-    return poses.spherical_camera(jnp.asarray(uv, jnp.float32), sphere)
-
-  train, test = cameras(int(cfg.num_train), 0), cameras(int(cfg.num_test), 1)
-  r = float(s.radius) + 0.2
-  return LightData("synthetic", train, test, basis_images(train), basis_images(test),
-                   (np.full(3, -r), np.full(3, r)))
-
-
-# The kinds of light-planning data: a built-in Mitsuba scene's SH basis captures, or a
-# synthetic diffuse shell rendered by mfsample (no Mitsuba).
-LIGHT_DATA_KINDS = {"scene": _scene_data, "synthetic": _synthetic_data}
+  train, settings = basis_images(train_cameras, settings)
+  test, _ = basis_images(test_cameras, settings)
+  return LightData("synthetic", train_cameras, test_cameras, train, test, bounds)
 
 
 def to_device_cameras(cameras):

@@ -19,12 +19,13 @@ the uniform light's (`mfsample.lighting.lights`).
 
 import ml_collections
 
+from mfsample import config_blocks as blocks
 from mfsample import config_checks as cc
-from mfsample.lighting.captures import LIGHT_DATA_KINDS
-from mfsample.lighting.field import COEFFICIENT_COUNTS, group_shapes
+from mfsample.data.datasets import kinds_offering
+from mfsample.lighting.optimize import AscentSettings
 from mfsample.lighting.strategies import NAMES
-from mfsample.model import SAMPLER_KINDS
-from mfsample.train.config import validate_render
+from mfsample.lighting.training import FieldSettings, LightRecipe
+from mfsample.train import settings as ts
 
 
 def default_config():
@@ -37,27 +38,16 @@ def default_config():
   config.progress = True  # tqdm progress bars.
 
   # ----------------------------------------------------------------- data
-  config.data = data = ml_collections.ConfigDict()
-  data.kind = "scene"  # "scene" (Mitsuba SH basis captures) or "synthetic" (no Mitsuba).
-  data.scene = "default"  # mfsample.scenes.get_scene name.
-  data.width = 48  # Image width in pixels (paper: 800).
-  data.height = 48  # Image height in pixels.
-  data.num_train = 12  # Fixed training cameras (captures are taken there).
-  data.num_test = 4  # Held-out test cameras.
-  data.camera_seed = 0  # Seed of the training poses (test poses: camera_seed + 1).
-  # Mitsuba samples per pixel of each of the 2n - 1 signed basis renders per camera
-  # (mfsample.scenes.DEFAULT_SH_SPP).
-  data.spp = 16
-  data.cache_dir = ""  # Capture cache ("": $MFSAMPLE_CACHE or ~/.cache/mfsample/captures).
-  data.progress = True  # Progress bar of the captures.
-  # kind "synthetic": a shell of random diffuse Gaussians rendered by mfsample.
-  data.synthetic = syn = ml_collections.ConfigDict()
-  syn.num_gaussians = 150  # Ground-truth Gaussians.
-  syn.seed = 0  # Their seed (positions, sizes, albedos).
-  syn.radius = 0.5  # Radius of the shell.
-  syn.distance = 3.0  # Camera sphere radius.
-  syn.v_range = (0.1, 0.6)  # Polar band of the cameras (v = polar / pi).
-  syn.fov_x_deg = 40.0  # Horizontal field of view in degrees.
+  # A data kind that offers images under any light (mfsample.data.DATA_KINDS): "scene"
+  # (Mitsuba SH basis captures) or "synthetic" (a shell of random diffuse Gaussians rendered
+  # by mfsample: no Mitsuba). The training cameras (num_train) are fixed, the captures are
+  # taken there; 48 x 48 (paper: 800). Mitsuba takes data.spp samples per pixel of each of
+  # the 2n - 1 signed basis renders per camera (mfsample.scenes.DEFAULT_SH_SPP). The
+  # background is black (radiance 0), as the basis captures are.
+  config.data = blocks.data_block(
+      width=48, height=48, num_train=12, num_test=4, spp=16, background=(0.0, 0.0, 0.0),
+      **{"synthetic.shape": "shell", "synthetic.num_gaussians": 150, "synthetic.radius": 0.5,
+         "synthetic.cameras": "band", "synthetic.fov_x_deg": 40.0})
 
   # ----------------------------------------------------------------- model
   config.model = model = ml_collections.ConfigDict()
@@ -73,83 +63,45 @@ def default_config():
   model.extent = None  # Scene extent (world units); None: from the training cameras (3DGS).
 
   # ----------------------------------------------------------------- sampler (B_hat)
-  config.sampler = sampler = ml_collections.ConfigDict()
-  sampler.kind = "lowrank"  # "lowrank" (paper), "block", "diagonal" or "deterministic".
-  sampler.rank = 2  # k, columns of B_hat (paper default 2).
-  # Stochastic groups: B_hat over T (the authors' setup). Geometry groups may be added.
-  sampler.groups = ("transfer_dc", "transfer_rest")
-  sampler.num_samples = 1  # M, samples rendered per training step (paper: 1).
-  sampler.z_seed = 6174  # Scrambling seed of the Sobol z (authors' code: 6174).
-  sampler.init_scale = 1e-3  # Raw B_hat entries start at init_scale * U[0, 1] (authors) ...
-  sampler.init_extent_groups = ("means", "log_scales")  # ... times extent for these.
-  sampler.bounds = bounds = ml_collections.ConfigDict()  # relu(raw) is kept in [0, bound].
-  bounds.means = 1.0  # Centres, in units of the scene extent.
-  bounds.log_scales = 20.0
-  bounds.quats = 2.0
-  bounds.opacity_logits = 20.0
-  bounds.transfer_dc = 0.5  # T (authors: [0, 0.5]).
-  bounds.transfer_rest = 0.5
-  sampler.lr = lr = ml_collections.ConfigDict()  # Adam learning rates of raw B_hat entries.
-  lr.means = 1.6e-5  # Times the scene extent (as the colour model).
-  lr.log_scales = 5e-4
-  lr.quats = 1e-4
-  lr.opacity_logits = 5e-3
-  lr.transfer_dc = 5e-4  # 0.1 x T's (the authors' ratio).
-  lr.transfer_rest = 2.5e-5
+  # B_hat over T (the authors' setup; geometry groups may be added to `groups`): bounds of T
+  # [0, 0.5] (authors), learning rates 0.1 x T's (the authors' ratio). Centres as the colour
+  # model (times the scene extent).
+  config.sampler = blocks.sampler_block(
+      groups=("transfer_dc", "transfer_rest"),
+      bounds={"means": 1.0, "log_scales": 20.0, "quats": 2.0, "opacity_logits": 20.0,
+              "transfer_dc": 0.5, "transfer_rest": 0.5},
+      lr={"means": 1.6e-5, "log_scales": 5e-4, "quats": 1e-4, "opacity_logits": 5e-3,
+          "transfer_dc": 5e-4, "transfer_rest": 2.5e-5})
 
   # ----------------------------------------------------------------- loss (Eq. 9)
-  config.loss = loss = ml_collections.ConfigDict()
-  loss.ssim_weight = 0.2  # w in (1 - w) L1 + w (1 - SSIM), on linear radiance.
-  # lambda of the volume term on the plain sum of |B_hat|. The authors' camera code uses
-  # 1 / (training views); their lighting code does not say. At 1 / 12 the volume gradient
-  # swamps the data gradients in Adam's normalisation and every B_hat entry of T grows at the
-  # same rate, seen or not: after 400 steps under the uniform light (at the authors' rates)
-  # U of the uniform light's own coefficient (Q_00) was no lower than the others' (0.027
-  # against 0.026-0.037, measured). At 1e-4 the data gradients of T's seen column dominate
-  # their Adam denominators and slow their growth: Q_00 = 0.0026 against 0.030-0.040 (the
-  # camera planning config chose 1e-4 for the same reason).
-  loss.volume_weight = 1e-4
-  loss.volume_every = 10  # Applied on every 10th step only (paper).
-  loss.volume_stop_before_end = 0  # No volume term in the run's last steps.
+  # On linear radiance. lambda of the volume term on the plain sum of |B_hat|: the authors'
+  # camera code uses 1 / (training views); their lighting code does not say. At 1 / 12 the
+  # volume gradient swamps the data gradients in Adam's normalisation and every B_hat entry
+  # of T grows at the same rate, seen or not: after 400 steps under the uniform light (at the
+  # authors' rates) U of the uniform light's own coefficient (Q_00) was no lower than the
+  # others' (0.027 against 0.026-0.037, measured). At 1e-4 the data gradients of T's seen
+  # column dominate their Adam denominators and slow their growth: Q_00 = 0.0026 against
+  # 0.030-0.040 (the camera planning config chose 1e-4 for the same reason). No volume term
+  # is dropped at the end of the run.
+  config.loss = blocks.loss_block(volume_weight=1e-4, volume_stop_before_end=0)
 
   # ----------------------------------------------------------------- optimiser (mean)
-  config.optim = optim = ml_collections.ConfigDict()
-  optim.position_lr_init = 1.6e-4  # Times extent; decays exponentially over the run ...
-  optim.position_lr_final = 1.6e-6  # ... to this (times extent).
-  optim.log_scales = 5e-3
-  optim.quats = 1e-3
-  optim.opacity_logits = 0.05
-  # T's outgoing DC row and other rows: 4x the authors' 1.25e-3 and 6.25e-5 (their 20:1
-  # ratio kept), because a light here has 400 steps, not 7000. At the authors' rates the
-  # first phase (uniform light, 400 steps) reached 24.6 dB on its training views and 22.1 dB
-  # on the test views under the uniform light; at 4x, 26.4 and 24.4 dB (measured).
-  optim.transfer_dc = 5e-3
-  optim.transfer_rest = 2.5e-4
+  # T's outgoing DC row and other rows: 4x the authors' 1.25e-3 and 6.25e-5 (their 20:1 ratio
+  # kept), because a light here has 400 steps, not 7000. At the authors' rates the first
+  # phase (uniform light, 400 steps) reached 24.6 dB on its training views and 22.1 dB on the
+  # test views under the uniform light; at 4x, 26.4 and 24.4 dB (measured). The centres'
+  # rate decays over the whole run.
+  config.optim = blocks.optim_block(rates={"log_scales": 5e-3, "quats": 1e-3,
+                                           "opacity_logits": 0.05, "transfer_dc": 5e-3,
+                                           "transfer_rest": 2.5e-4})
 
   # ----------------------------------------------------------------- densification
-  config.densify = densify = ml_collections.ConfigDict()  # 3DGS density control.
-  densify.start = 10**9  # Off by default: static shapes, one compilation for every phase.
-  densify.stop = 10**9
-  densify.every = 100
-  densify.grad_threshold = 2e-4
-  densify.percent_dense = 0.01
-  densify.min_opacity = 0.005
-  densify.opacity_reset_every = 10**9
-  densify.prune_big_after = 10**9
-  densify.max_world_size = 0.1
-  densify.max_screen_size = 0.0
+  # 3DGS density control, off by default: static shapes, one compilation for every phase.
+  config.densify = densify = blocks.densify_block()
+  densify.start = densify.stop = 10**9
+  densify.opacity_reset_every = densify.prune_big_after = 10**9
 
-  # ----------------------------------------------------------------- render budget
-  config.render = render = ml_collections.ConfigDict()
-  render.max_intersections = 1 << 14  # Initial budget; grown (power of 2) on overflow.
-  render.max_budget = 1 << 24  # Refuse to grow beyond this (error, never truncation).
-  render.tile_size = 16
-  render.chunks_per_step = 16
-  # A Gaussian reaches min(radius_sigma, sqrt(2 ln(opacity / alpha_min))) standard
-  # deviations (docs/renderer.md); 3.0 reproduces the results in docs/lighting.md, which
-  # were measured with mfsample's former 3-sigma cut.
-  render.radius_sigma = 3.33
-  render.compositor = "jnp"  # "jnp" or "pallas" (the GPU kernel): speed only.
+  config.render = blocks.render_block(max_intersections=1 << 14)  # Static renderer settings.
 
   # ----------------------------------------------------------------- light planning
   config.planning = planning = ml_collections.ConfigDict()
@@ -188,38 +140,76 @@ def validate(config):
   """Checks every field the protocol reads; `ConfigError` naming the field and its range."""
   cc.check_int(config, "seed", minimum=0)
   cc.check_sequence(config, "strategies", item_choices=NAMES, distinct=True)
-  n = cc.check_choice(config, "model.light_coeffs", COEFFICIENT_COUNTS[1:])
-  cc.check_choice(config, "model.out_coeffs", COEFFICIENT_COUNTS)
   lights = cc.check_int(config, "num_lights", minimum=1)
+  cc.check_int(config, "steps_per_light", minimum=1)
+  recipe = light_recipe(config, extent=1.0)
+  n = recipe.field.light_coeffs
   if "orthogonal" in config.strategies and lights > n:
     raise cc.ConfigError(f"config.num_lights = {lights}: the orthogonal strategy needs "
                          f"num_lights <= model.light_coeffs = {n} (a new direction per light)")
-  cc.check_int(config, "steps_per_light", minimum=1)
-  cc.check_choice(config, "data.kind", LIGHT_DATA_KINDS)
+  data = blocks.data_spec(config.data)
+  if "lights" not in data.offers:
+    raise cc.ConfigError(f"config.data.kind = {data.kind!r} has no images under new lights: "
+                         f"must be one of {', '.join(map(repr, kinds_offering('lights')))}")
   for f in ("data.width", "data.height"):
     cc.check_int(config, f, minimum=11)  # the SSIM window
-  cc.check_int(config, "data.num_train", minimum=1)
-  cc.check_int(config, "data.num_test", minimum=1)
-  cc.check_int(config, "model.init_points", minimum=1)
-  cc.check_float(config, "model.init_opacity", above=0.0, below=1.0)
-  cc.check_choice(config, "sampler.kind", SAMPLER_KINDS)
-  cc.check_int(config, "sampler.rank", minimum=1)
-  cc.check_sequence(config, "sampler.groups", min_length=0, distinct=True,
-                    item_choices=tuple(group_shapes(16, 16)))
-  cc.check_int(config, "sampler.num_samples", minimum=1)
-  cc.check_float(config, "loss.volume_weight", minimum=0.0)
-  cc.check_int(config, "loss.volume_every", minimum=1)
+  cc.check_float(config, "model.extent", above=0.0, optional=True)
   cc.check_int(config, "planning.samples", minimum=2)
   cc.check_int(config, "planning.downscale", minimum=1)
-  cc.check_int(config, "planning.ascent_steps", minimum=1)
-  lr = cc.check_float(config, "planning.ascent_lr", above=0.0)
-  cc.check_float(config, "planning.ascent_final_lr", above=0.0, maximum=lr)
+  ascent_settings(config)
   cc.check_int(config, "test_lights.num_environments", minimum=0)
   cc.check_int(config, "test_lights.num_random", minimum=0)
   if config.test_lights.num_environments + config.test_lights.num_random < 1:
     raise cc.ConfigError("config.test_lights: num_environments + num_random must be >= 1")
   cc.check_float(config, "test_lights.power", above=0.0)
-  validate_render(config)
+
+
+# ----------------------------------------------------------------- translators
+
+
+def light_recipe(config, extent):
+  """The `training.LightRecipe` of a light-planning config for a scene of `extent` (world
+  units): the whole run's `TrainSettings` (`num_lights` x `steps_per_light` steps, black
+  background), the field's start and its `SamplerSpec`."""
+  s = config.sampler
+  with cc.translated({"FieldSettings": "model"}):
+    field_settings = FieldSettings(out_coeffs=config.model.out_coeffs,
+                                   light_coeffs=config.model.light_coeffs,
+                                   init_points=config.model.init_points,
+                                   init_opacity=config.model.init_opacity)
+  names = {"TrainSettings.num_samples": "sampler.num_samples",
+           "TrainSettings.stochastic_until": "sampler.stochastic_until",
+           "TrainSettings.z_seed": "sampler.z_seed",
+           "TrainSettings.b_hat_init_scale": "sampler.init_scale",
+           "TrainSettings.b_hat_init_extent_groups": "sampler.init_extent_groups",
+           "TrainSettings.max_budget": "render.max_budget",
+           "TrainSettings.num_steps": "steps_per_light"}
+  render = blocks.render_settings(config.render)
+  parts = dict(loss=blocks.loss_settings(config.loss),
+               optim=blocks.optim_settings(config.optim, s.lr),
+               densify=blocks.densify_settings(config.densify, config.model.max_gaussians))
+  with cc.translated(names):
+    settings = ts.TrainSettings(
+        num_steps=int(config.num_lights) * int(config.steps_per_light),
+        num_samples=s.num_samples, stochastic_until=s.stochastic_until, z_seed=s.z_seed,
+        b_hat_init_scale=s.init_scale, b_hat_init_extent_groups=tuple(s.init_extent_groups),
+        extent=float(extent), background=(0.0, 0.0, 0.0), sh_degree_every=0,
+        max_budget=config.render.max_budget, render=render, **parts)
+  if settings.loss.volume_weight is None:
+    raise cc.ConfigError("config.loss.volume_weight = None: the light protocol needs a "
+                         "fixed lambda (one compilation for every phase)")
+  spec = blocks.sampler_spec(s, float(extent), field_settings.group_shapes)
+  return LightRecipe(settings, field_settings, spec, float(extent))
+
+
+def ascent_settings(config):
+  """The `optimize.AscentSettings` of the `planning` block."""
+  p = config.planning
+  names = {"AscentSettings.steps": "planning.ascent_steps",
+           "AscentSettings.lr": "planning.ascent_lr",
+           "AscentSettings.final_lr": "planning.ascent_final_lr"}
+  with cc.translated(names):
+    return AscentSettings(steps=p.ascent_steps, lr=p.ascent_lr, final_lr=p.ascent_final_lr)
 
 
 # ----------------------------------------------------------------- variants

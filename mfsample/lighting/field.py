@@ -38,7 +38,7 @@ from mfsample.model import (
     check_init_scales,
     check_initial,
     host_rng,
-    init_spread,
+    init_b_hat,
     knn_scale,
     padding_values,
 )
@@ -215,7 +215,7 @@ def init_relightable(key, points, *, spec, out_coeffs, light_coeffs, init_scales
 
   Geometry as `mfsample.model.init_model` (3DGS: isotropic scales from the 3 nearest
   neighbours, identity rotations, opacity `init_opacity`); B_hat entries of the stochastic
-  groups of `spec` ~ init_scale * U[0, 1] with random signs (`mfsample.model.init_spread`).
+  groups of `spec` ~ init_scale * U[0, 1] with random signs (`mfsample.model.init_b_hat`).
 
   Args:
     key: PRNG key (B_hat entries and signs).
@@ -223,7 +223,7 @@ def init_relightable(key, points, *, spec, out_coeffs, light_coeffs, init_scales
     spec: `SamplerSpec` (groups among `GEOMETRY_GROUPS` and the transfer groups).
     out_coeffs: m, outgoing SH coefficients (1: diffuse).
     light_coeffs: n, light SH coefficients.
-    init_scales: {group: float} see `init_spread`.
+    init_scales: {group: float} see `init_b_hat`.
     capacity: C >= N (default `mfsample.model.capacity_bucket(N)`).
     init_opacity: initial opacity in (0, 1).
 
@@ -250,11 +250,11 @@ def init_relightable(key, points, *, spec, out_coeffs, light_coeffs, init_scales
   pad = padding_values(shapes, capacity - n)
   mean = {g: jnp.asarray(np.concatenate([v.astype(np.float32), pad[g]], axis=0))
           for g, v in mean.items()}
-  spread, signs = init_spread(host_rng(key), n, shapes, spec, init_scales)
+  b_hat, signs = init_b_hat(host_rng(key), n, shapes, spec, init_scales)
 
   def padded(x):
     return jnp.asarray(np.concatenate([x, np.zeros((capacity - n,) + x.shape[1:], x.dtype)]))
 
-  return Model(Params(mean, {g: padded(v) for g, v in spread.items()}),
+  return Model(Params(mean, {g: padded(v) for g, v in b_hat.items()}),
                {g: padded(v) for g, v in signs.items()}, jnp.asarray(np.arange(capacity) < n),
                jnp.asarray(0, jnp.int32), spec)

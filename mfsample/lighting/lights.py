@@ -83,10 +83,6 @@ def canonical_sign(xi):
   return -xi if nonzero.size and xi[nonzero[0]] < 0 else xi
 
 
-def num_coefficients_of(degree):
-  return (int(degree) + 1) ** 2
-
-
 def degree_of(n):
   """SH degree l of n = (l + 1)^2 coefficients."""
   if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:

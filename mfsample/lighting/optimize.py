@@ -25,13 +25,13 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from mfsample import arg_checks
+from mfsample import settings_checks as sc
 from mfsample.lighting import lights as lights_lib
 from mfsample.lighting import uncertainty as lu
 from mfsample.renderer.budget import BudgetExceededError
 from mfsample.renderer.settings import RenderSettings
 from mfsample.sharding import default_num_devices
-from mfsample.uncertainty import check_z
+from mfsample.view_uncertainty import check_z
 
 
 @dataclasses.dataclass(frozen=True)
@@ -51,10 +51,10 @@ class AscentSettings:
   norm: float = lights_lib.UNIFORM_NORM
 
   def __post_init__(self):
-    arg_checks.check_int("AscentSettings.steps", self.steps, minimum=1)
-    arg_checks.check_float("AscentSettings.lr", self.lr, above=0.0)
-    arg_checks.check_float("AscentSettings.final_lr", self.final_lr, above=0.0, maximum=self.lr)
-    arg_checks.check_float("AscentSettings.norm", self.norm, above=0.0)
+    sc.check_int("AscentSettings.steps", self.steps, minimum=1)
+    sc.check_float("AscentSettings.lr", self.lr, above=0.0)
+    sc.check_float("AscentSettings.final_lr", self.final_lr, above=0.0, maximum=self.lr)
+    sc.check_float("AscentSettings.norm", self.norm, above=0.0)
 
 
 class AscentResult(NamedTuple):

@@ -35,18 +35,19 @@ import jax.numpy as jnp
 import numpy as np
 
 from mfsample import jobs
+from mfsample.config_blocks import data_spec, speed_only_fields
+from mfsample.data.datasets import load_light_data, scene_extent
+from mfsample.jobs import Budgets
 from mfsample.lighting import captures as cap
 from mfsample.lighting import evaluate as ev
 from mfsample.lighting import lights as lights_lib
 from mfsample.lighting import optimize as opt_lib
 from mfsample.lighting import strategies, tables, training
 from mfsample.lighting import uncertainty as lu
-from mfsample.lighting.config import validate
+from mfsample.lighting.config import ascent_settings, light_recipe, validate
 from mfsample.planning.poses import downscale_camera
-from mfsample.renderer.budget import Budgets
+from mfsample.samplers import sample_z
 from mfsample.train.checkpoint import CorruptCheckpointError
-from mfsample.train.config import render_settings, speed_only_fields
-from mfsample.uncertainty import uncertainty_z
 
 # ------------------------------------------------------------------ pure pieces
 
@@ -65,6 +66,7 @@ class Context(NamedTuple):
   norm: float
   ascent: opt_lib.AscentSettings
   lpips_fn: object
+  recipe: training.LightRecipe  # the field's training, start and sampler
 
 
 def make_context(config, data):
@@ -80,12 +82,13 @@ def make_context(config, data):
   if config.eval.lpips_net:
     from mfsample.metrics import make_lpips
     lpips_fn = make_lpips(config.eval.lpips_net)
+  extent = config.model.extent
+  if extent is None:  # 3DGS's, from the training cameras
+    extent = scene_extent(data.train_cameras)
   return Context(config, data, test_lights, kinds, cap.capture_many(data.test_basis, test_lights),
                  cameras, downscale_camera(cameras, int(p.downscale)),
                  cap.to_device_cameras(data.test_cameras), lights_lib.UNIFORM_NORM,
-                 opt_lib.AscentSettings(steps=int(p.ascent_steps), lr=float(p.ascent_lr),
-                                        final_lr=float(p.ascent_final_lr)),
-                 lpips_fn)
+                 ascent_settings(config), lpips_fn, light_recipe(config, extent))
 
 
 def light_slots(ctx: Context, used):
@@ -102,25 +105,25 @@ def light_slots(ctx: Context, used):
   return jnp.asarray(images), jnp.asarray(lights, jnp.float32)
 
 
-def _settings(config, budget):
-  """The config's rasterisation rule and compositor with a starting `budget` (it grows)."""
-  return render_settings(config.render).holding_budget(budget)
+def _settings(ctx: Context, budget):
+  """The run's rasterisation rule and compositor with a starting `budget` (it grows)."""
+  return ctx.recipe.settings.render.holding_budget(budget)
 
 
 def evaluate_phase(ctx: Context, model, budgets: Budgets):
   """(test metrics, predictions [K, T, H, W, 3], budgets) of `model`."""
   metrics, pred, settings = ev.evaluate_relit(
       model, ctx.test_cameras, ctx.test_lights, ctx.test_truth, ctx.test_kinds,
-      settings=budgets.eval or _settings(ctx.config, 1 << 14), lpips_fn=ctx.lpips_fn)
+      settings=budgets.get("eval") or _settings(ctx, 1 << 14), lpips_fn=ctx.lpips_fn)
   return metrics, pred, budgets.replace(eval=settings)
 
 
 def gram_of(ctx: Context, model, budgets: Budgets):
   """(Q, z, budgets) of U over the planning cameras for `model`."""
   p = ctx.config.planning
-  z = uncertainty_z(model, int(p.samples), int(p.z_seed))
+  z = sample_z(model, int(p.samples), seed=int(p.z_seed))
   gram, settings = lu.light_gram(model, ctx.plan_cameras, z,
-                                 settings=budgets.u or _settings(ctx.config, 1 << 13))
+                                 settings=budgets.get("u") or _settings(ctx, 1 << 13))
   return np.asarray(gram.q, np.float64), z, budgets.replace(u=settings)
 
 
@@ -135,7 +138,8 @@ def choose_light(ctx: Context, strategy, model, used, key, budgets: Budgets):
   q, z, budgets = gram_of(ctx, model, budgets)
   inputs = strategies.LightInputs(
       model=model, cameras=ctx.plan_cameras, z=z, q=q, used=np.asarray(used), index=len(used),
-      norm=ctx.norm, ascent=ctx.ascent, budgets=budgets,
+      norm=ctx.norm, ascent=ctx.ascent,
+      renders=strategies.LightRenders(budgets.get("u"), budgets.get("ascent")),
       sobol_seed=int(ctx.config.planning.sobol_seed))
   choice = strategy.select(inputs, key)
   top, _ = lu.top_eigen(q)
@@ -143,17 +147,18 @@ def choose_light(ctx: Context, strategy, model, used, key, budgets: Budgets):
   u_max = ctx.norm ** 2 * top
   return choice.light, {"light": choice.light.tolist(), "u": u, "u_max": u_max,
                         "u_ratio": u / u_max if u_max > 0 else None, "info": choice.info,
-                        "plan_seconds": time.perf_counter() - t0, "q": q.tolist()}, choice.budgets
+                        "plan_seconds": time.perf_counter() - t0, "q": q.tolist()}, \
+      budgets.replace(ascent=choice.renders.ascent)
 
 
 # ------------------------------------------------------------------ the loop
 
 
-def _restored(directory, config, setup, bounds):
+def _restored(directory, ctx, setup):
   """`training.restore_state`, or None (with a warning) when no checkpoint there is intact:
   the phase is then trained again."""
   try:
-    return training.restore_state(directory, config, setup, bounds)
+    return training.restore_state(directory, ctx.recipe, setup, ctx.data.bounds)
   except CorruptCheckpointError as e:
     warnings.warn(f"{e}; the phase is trained again", stacklevel=2)
     return None
@@ -167,16 +172,16 @@ def _shared_phase(ctx, setup, wd, bar, budgets):
   record = wd.read_json("shared/record.json")
   restored = None
   if record is not None:
-    restored = _restored(directory, config, setup, ctx.data.bounds)
+    restored = _restored(directory, ctx, setup)
   if restored is not None:
     state, setup, _ = restored
     bar.update(int(config.steps_per_light))
     return state, setup, record, budgets
   used = lights_lib.uniform_light(ctx.data.light_coeffs)[None]
   images, lights = light_slots(ctx, used)
-  state = training.init_state(config, setup, ctx.data.bounds)
+  state = training.initial_state(ctx.recipe, setup, ctx.data.bounds)
   bar.set_postfix_str("uniform light")
-  res = training.train_steps(config, setup, state, images, lights, ctx.cameras, num_lights=1,
+  res = training.train_steps(setup, state, images, lights, ctx.cameras, num_lights=1,
                              phase_start=0, end=int(config.steps_per_light),
                              on_step=lambda _: bar.update(1))
   metrics, pred, budgets = evaluate_phase(ctx, res.state.model, budgets)
@@ -200,7 +205,7 @@ def _run_strategy(ctx, name, shared, setup, wd, bar, budgets):
   config = ctx.config
   total, steps = int(config.num_lights), int(config.steps_per_light)
   strategy = strategies.make_light_strategy(name)
-  restored = _restored(wd.file("runs", name), config, setup, ctx.data.bounds)
+  restored = _restored(wd.file("runs", name), ctx, setup)
   if restored is not None:
     state, setup, meta = restored
     phases = meta["phases"]
@@ -218,7 +223,7 @@ def _run_strategy(ctx, name, shared, setup, wd, bar, budgets):
     used.append(light)
     images, lights = light_slots(ctx, np.stack(used))
     start = (len(used) - 1) * steps
-    res = training.train_steps(config, setup, state, images, lights, ctx.cameras,
+    res = training.train_steps(setup, state, images, lights, ctx.cameras,
                                num_lights=len(used), phase_start=start, end=start + steps,
                                on_step=lambda _: bar.update(1))
     state, setup = res.state, res.setup
@@ -249,12 +254,12 @@ def run_light_planning(config, workdir):
   load_start = list(os.getloadavg())
   with jobs.open_workdir(JOB, config, workdir) as wd:
     t0, cpu0 = time.perf_counter(), time.process_time()
-    data = cap.make_light_data(config.data, int(config.model.light_coeffs))
+    data = load_light_data(data_spec(config.data), int(config.model.light_coeffs))
     capture_seconds, capture_cpu = time.perf_counter() - t0, time.process_time() - cpu0
     wd.write_config()
     ctx = make_context(config, data)
     total, steps = int(config.num_lights), int(config.steps_per_light)
-    setup = training.make_setup(config, data.train_cameras, total * steps)
+    setup, _ = training.start(ctx.recipe, int(config.seed), data.bounds)
     names = list(config.strategies)
     bar = wd.progress(steps + len(names) * (total - 1) * steps, unit="step")
     budgets = Budgets()
@@ -319,5 +324,5 @@ def run_light_planning(config, workdir):
 # Fields a later call on the same workdir may change: which strategies to run, how the run
 # is shown, and speed-only settings.
 FREE_FIELDS = ("strategies", "progress", "data.progress", "figures") + speed_only_fields()
-JOB = jobs.Job("light planning", run_light_planning, validate, FREE_FIELDS, ("shared", "runs"),
-               report=jobs.table_report)
+JOB = jobs.Job("light planning", "light_planning", run_light_planning, validate, FREE_FIELDS,
+               ("shared", "runs"), report=jobs.table_report)

@@ -36,7 +36,15 @@ from mfsample import streams
 from mfsample.lighting import lights as lights_lib
 from mfsample.lighting import optimize as opt_lib
 from mfsample.lighting import uncertainty as lu
-from mfsample.renderer.budget import Budgets
+from mfsample.renderer.settings import RenderSettings
+
+
+class LightRenders(NamedTuple):
+  """The render settings that sufficed before for U over the cameras and for the ascent's
+  renders (None: not known yet)."""
+
+  u: RenderSettings | None = None
+  ascent: RenderSettings | None = None
 
 
 class LightInputs(NamedTuple):
@@ -52,7 +60,7 @@ class LightInputs(NamedTuple):
     index: the number of lights used so far.
     norm: the common norm of the lights.
     ascent: `optimize.AscentSettings` (Ours).
-    budgets: `Budgets` that sufficed before (`u`: U over the cameras; `ascent`).
+    renders: `LightRenders` that sufficed before.
     sobol_seed: scrambling seed of the Sobol strategy.
   """
 
@@ -64,7 +72,7 @@ class LightInputs(NamedTuple):
   index: int
   norm: float
   ascent: opt_lib.AscentSettings
-  budgets: Budgets
+  renders: LightRenders = LightRenders()
   sobol_seed: int = 1
 
 
@@ -74,12 +82,12 @@ class LightChoice(NamedTuple):
   Attributes:
     light: [n] float64, |light| = norm, positive DC coefficient.
     info: json-able extras.
-    budgets: the inputs' `Budgets`, with those the strategy grew.
+    renders: the inputs' `LightRenders`, with those the strategy grew.
   """
 
   light: np.ndarray
   info: dict
-  budgets: Budgets
+  renders: LightRenders
 
 
 class LightStrategy(NamedTuple):
@@ -99,7 +107,7 @@ def _rng(key):
 
 def _finish(xi, inputs, info=None):
   light = lights_lib.canonical_sign(lights_lib.on_sphere(xi, inputs.norm))
-  return LightChoice(light, dict(info or {}), inputs.budgets)
+  return LightChoice(light, dict(info or {}), inputs.renders)
 
 
 def random_light(inputs: LightInputs, key) -> LightChoice:
@@ -150,11 +158,11 @@ def ours_light(inputs: LightInputs, key) -> LightChoice:
   start = np.zeros(n)
   start[j] = inputs.norm
   result = opt_lib.ascend(inputs.model, inputs.cameras, inputs.z, start, opt=inputs.ascent,
-                          settings=inputs.budgets.first("ascent", "u"))
+                          settings=inputs.renders.ascent or inputs.renders.u)
   info = {"one_hot": j, "u_one_hot": u_one_hot, "u_start": float(result.values[0]),
           "u_end": result.value, "values": result.values.tolist()}
   return _finish(result.light,
-                 inputs._replace(budgets=inputs.budgets.replace(ascent=result.settings)), info)
+                 inputs._replace(renders=inputs.renders._replace(ascent=result.settings)), info)
 
 
 def ours_exact_light(inputs: LightInputs, key) -> LightChoice:

@@ -37,7 +37,7 @@ from mfsample.renderer.budget import render_with_budget
 from mfsample.renderer.settings import RenderSettings
 from mfsample.renderer.tiles import TileStats
 from mfsample.sharding import default_num_devices, map_cameras
-from mfsample.uncertainty import check_z, pixel_variance
+from mfsample.view_uncertainty import check_z, pixel_variance
 
 
 class LightUncertainty(NamedTuple):
@@ -128,7 +128,7 @@ def light_uncertainty(model, cameras, z, xi, *, settings: RenderSettings, num_de
   Args:
     model: a relightable `mfsample.model.Model` (`field`).
     cameras: `Camera` batched over [B].
-    z: [M, *samplers.z_shape(model)] samples (`mfsample.uncertainty.uncertainty_z`).
+    z: [M, *samplers.z_shape(model)] samples (`mfsample.samplers.sample_z`).
     xi: [n] white SH light (finite; checked when concrete).
     settings: `RenderSettings` (static); check `stats.overflow`, or use
       `light_uncertainty_fitted`, which grows the budget.

@@ -12,10 +12,11 @@ tiny synthetic scene) on the command line; every number is a field below.
 
 import ml_collections
 
+from mfsample import config_blocks as blocks
 from mfsample import config_checks
+from mfsample.config_blocks import data_spec, from_block
 from mfsample.data import FILE_KINDS
-from mfsample.model import GROUPS, STOCHASTIC_KINDS
-from mfsample.planning.pool import POOL_KINDS
+from mfsample.planning import strategies as st
 from mfsample.planning.strategies import NAMES, STRATEGIES, TABLE1_NAMES
 from mfsample.train.config import LPIPS_NETS
 from mfsample.train.config import default_config as training_config
@@ -72,41 +73,18 @@ def default_config():
   config.paired_references = ("farthest", "fisher", "ours_sel")
 
   # ----------------------------------------------------------------- data
-  config.data = data = ml_collections.ConfigDict()
-  # "scene" (Mitsuba oracle), "synthetic", or a dataset on disk, "blender", "colmap",
-  # "llff" or "nerfstudio" (fixed pools): `mfsample.planning.pool.POOL_KINDS`.
-  data.kind = "scene"
-  data.background = (1.0, 1.0, 1.0)  # White, as the captures are composited.
-  data.progress = True  # Progress bars of the captures.
-  data.pool_seed = 0  # Seed of the candidate poses (test poses use pool_seed + 1).
-  # kind "scene" (and "synthetic"): the image size and the number of views.
-  data.scene = "default"  # mfsample.scenes.get_scene name.
-  data.width = 64  # Image width in pixels (paper: 800).
-  data.height = 64  # Image height in pixels.
-  data.num_candidates = 100  # Candidate pool (paper: the 100 training views).
-  data.num_test = 40  # Held-out test views.
-  data.spp = 36  # Mitsuba samples per pixel of a capture (mfsample.scenes.DEFAULT_SPP).
-  data.cache_dir = ""  # Capture cache ("": $MFSAMPLE_CACHE or ~/.cache/mfsample/captures).
-  # kind "blender": a NeRF Synthetic scene on disk. Candidates = its train split, test = its
-  # test split; no oracle, so only the selection strategies run.
-  data.path = "data/nerf_synthetic/lego"  # Scene folder (relative: to the cwd).
-  data.downscale = 5  # Integer image downscale (lego's 400 x 400 files: 80 x 80).
-  data.test_every = 4  # Every n-th test view (50 of lego's 200).
-  data.bounds = (-1.3, 1.3)  # Cube of the random initial points (NeRF Synthetic's).
-  # kind "colmap", "llff", "nerfstudio": a capture at `path` (images_{downscale}/ when
-  # downscale > 1);
-  # every holdout_every-th image by name is a test view, the others the candidates. Round
-  # models start from its sparse points with round_train.model.init_from = "points".
-  data.holdout_every = 8
-  # kind "synthetic": random ground-truth Gaussians rendered by mfsample (no files).
-  data.synthetic = syn = ml_collections.ConfigDict()
-  syn.shape = "shell"  # An opaque shell ("shell") or a see-through "cloud".
-  syn.num_gaussians = 150  # Ground-truth Gaussians.
-  syn.seed = 0  # Their seed.
-  syn.radius = 0.5  # Radius of the shell (half-side of the cloud's cube).
-  syn.distance = 3.0  # Camera sphere radius.
-  syn.v_range = (0.1, 0.6)  # Polar band of the cameras (v = polar / pi).
-  syn.fov_x_deg = 40.0  # Horizontal field of view in degrees.
+  # The pool: a dataset of any kind (mfsample.data.DATA_KINDS). Its training views are the
+  # candidates (data.num_train: paper, the 100 training views), its test views held out. The
+  # built-in scene ("scene") and "synthetic" Gaussians capture any new pose; files
+  # ("blender", "colmap", "llff", "nerfstudio") are fixed pools, where only the selection
+  # strategies run (a capture's sparse points serve round models whose
+  # round_train.model.init_from is "points"). Defaults: 64 x 64 (paper: 800), 100
+  # candidates, 40 test views; lego's 400 x 400 files downscaled 5x (80 x 80), every 4th of
+  # its test views; the synthetic scene an opaque shell seen from a polar band.
+  config.data = blocks.data_block(
+      width=64, height=64, num_train=100, num_test=40, downscale=5, test_every=4,
+      **{"synthetic.shape": "shell", "synthetic.num_gaussians": 150, "synthetic.radius": 0.5,
+         "synthetic.cameras": "band", "synthetic.fov_x_deg": 40.0})
 
   # ----------------------------------------------------------------- training
   config.rounds = rounds = ml_collections.ConfigDict()
@@ -219,34 +197,15 @@ def validate(config):
   c.check_sequence(config, "paired_references", item_choices=NAMES, min_length=0,
                    distinct=True)
 
-  kind = c.check_choice(config, "data.kind", POOL_KINDS)
-  c.check_floats(config, "data.background", 3, minimum=0.0, maximum=1.0)
-  c.check_bool(config, "data.progress")
-  c.check_int(config, "data.pool_seed", minimum=0, maximum=2**31 - 2)  # test poses: seed + 1
-  c.check_str(config, "data.scene", non_empty=True)
-  for field in ("width", "height", "num_test", "spp", "downscale", "test_every"):
-    c.check_int(config, f"data.{field}", minimum=1)
-  num_candidates = c.check_int(config, "data.num_candidates", minimum=1)
-  c.check_int(config, "data.holdout_every", minimum=2)
-  if kind not in FILE_KINDS:  # the size of a pool on disk is known once loaded (the runner checks)
-    if max_views > num_candidates:
+  data = data_spec(config.data)
+  if data.kind not in FILE_KINDS:  # the size of a pool on disk is known once loaded
+    if max_views > data.num_train:
       raise c.ConfigError(f"config.max_views = {max_views} must be <= config.data."
-                          f"num_candidates = {num_candidates} (selection strategies pick "
-                          "distinct candidates)")
-    if config.initial_view >= num_candidates:
+                          f"num_train = {data.num_train} (the candidates: selection "
+                          "strategies pick distinct ones)")
+    if config.initial_view >= data.num_train:
       raise c.ConfigError(f"config.initial_view = {config.initial_view} must be < config."
-                          f"data.num_candidates = {num_candidates} (or < 0: a random one)")
-  c.check_str(config, "data.cache_dir")
-  c.check_str(config, "data.path")
-  c.check_floats(config, "data.bounds", 2, increasing=True)
-  c.check_choice(config, "data.synthetic.shape", ("shell", "cloud"))
-  c.check_int(config, "data.synthetic.num_gaussians", minimum=1)
-  c.check_int(config, "data.synthetic.seed", minimum=0)
-  radius = c.check_float(config, "data.synthetic.radius", above=0.0)
-  c.check_float(config, "data.synthetic.distance", above=radius)
-  c.check_floats(config, "data.synthetic.v_range", 2, minimum=0.0, maximum=1.0,
-                 increasing=True)
-  c.check_float(config, "data.synthetic.fov_x_deg", above=0.0, below=180.0)
+                          f"data.num_train = {data.num_train} (or < 0: a random one)")
 
   c.check_bool(config, "rounds.warm_start")
   c.check_int(config, "rounds.first_steps", minimum=1)
@@ -254,6 +213,11 @@ def validate(config):
   c.check_int(config, "rounds.downscale", minimum=1)
   validate_training(config.round_train, prefix="config.round_train")
   validate_training(config.final_train, prefix="config.final_train")
+  for name in ("round_train", "final_train"):
+    if config[name].data.extent is None:
+      raise c.ConfigError(f"config.{name}.data.extent = None: the planning protocol needs a "
+                          "fixed scene extent (the step's settings may not change with the "
+                          "number of views)")
   if config.rounds.warm_start:
     # Warm start continues one padded state, which cannot change shape (runner.round_config).
     total = int(config.rounds.first_steps) + (max_views - 2) * int(config.rounds.steps)
@@ -263,32 +227,8 @@ def validate(config):
           f"steps, which cannot densify: config.round_train.densify.start = "
           f"{config.round_train.densify.start} must be >= {total}")
 
-  s = "strategy"
-  c.check_int(config, f"{s}.score_downscale", minimum=1)
-  c.check_int(config, f"{s}.ours.select_samples", minimum=2)  # U of one sample is 0
-  c.check_int(config, f"{s}.ours.z_seed", minimum=0, maximum=2**32 - 1)
-  c.check_int(config, f"{s}.ours.chunk_size", minimum=1)
-  c.check_int(config, f"{s}.optimize.samples", minimum=2)
-  c.check_int(config, f"{s}.optimize.steps", minimum=0)
-  c.check_float(config, f"{s}.optimize.lr", above=0.0)
-  c.check_int(config, f"{s}.optimize.z_drop_step", minimum=0)
-  c.check_float(config, f"{s}.optimize.z_drop_scale", above=0.0, maximum=1.0)
-  c.check_int(config, f"{s}.optimize.downscale", minimum=1)
-  c.check_bool(config, f"{s}.optimize.resample_z")
-  c.check_choice(config, f"{s}.optimize.sampler", ("",) + STOCHASTIC_KINDS)
-  c.check_int(config, f"{s}.optimize.best_every", minimum=1)
-  c.check_int(config, f"{s}.fisher.probes", minimum=1)
-  c.check_int(config, f"{s}.fisher.train_probes", minimum=1)
-  c.check_float(config, f"{s}.fisher.reg", above=0.0)
-  c.check_sequence(config, f"{s}.fisher.groups", item_choices=GROUPS, distinct=True)
-  c.check_int(config, f"{s}.activenerf.steps", minimum=0)
-  for field in ("lr", "prior_var", "beta_min"):
-    c.check_float(config, f"{s}.activenerf.{field}", above=0.0)
-  c.check_float(config, f"{s}.activenerf.prior_weight", minimum=0.0)
-  c.check_int(config, f"{s}.acp.resolution", minimum=1)
-  c.check_int(config, f"{s}.acp.bins", minimum=1)
-  c.check_float(config, f"{s}.acp.weight", minimum=0.0)
-  c.check_float(config, f"{s}.acp.near", minimum=0.0)
+  c.check_int(config, "strategy.score_downscale", minimum=1)
+  strategy_settings(config)
 
   c.check_choice(config, "eval.lpips_net", LPIPS_NETS)
   c.check_bool(config, "figures.enabled")
@@ -304,7 +244,7 @@ def validate(config):
 def lego(config):
   """NeRF Synthetic lego on a fixed pool, at 80 x 80 (rounds and scoring at 40 x 40)."""
   config.strategies = tuple(n for n in TABLE1_NAMES if not STRATEGIES[n].make(
-      config.strategy).new_poses)  # the selection strategies: no oracle on disk
+      st.StrategySettings()).new_poses)  # the selection strategies: no oracle on disk
   config.data.kind = "blender"
   for t in (config.round_train, config.final_train):
     t.data.extent = 4.4  # 1.1 x the camera distance (4.03).
@@ -376,7 +316,7 @@ def tiny(config):
   config.data.kind = "synthetic"
   config.data.width = 24
   config.data.height = 24
-  config.data.num_candidates = 8
+  config.data.num_train = 8  # candidates
   config.data.num_test = 2
   config.data.background = (0.0, 0.0, 0.0)
   for t in (config.round_train, config.final_train):
@@ -408,3 +348,17 @@ def get_config(variant=""):
   """`default_config()` with the comma-separated `variant`s applied (`VARIANTS`)."""
   return config_checks.with_variants(default_config(), variant, VARIANTS,
                                      "configs/camera_planning.py")
+
+
+# ----------------------------------------------------------------- translators
+
+
+def strategy_settings(config):
+  """The `strategies.StrategySettings` of a planning config's `strategy` block."""
+  s = config.strategy
+  return st.StrategySettings(
+      ours=from_block(st.OursSettings, s.ours, "config.strategy.ours"),
+      optimize=from_block(st.AscentSettings, s.optimize, "config.strategy.optimize"),
+      fisher=from_block(st.FisherSettings, s.fisher, "config.strategy.fisher"),
+      activenerf=from_block(st.ActiveNerfSettings, s.activenerf, "config.strategy.activenerf"),
+      acp=from_block(st.AcpSettings, s.acp, "config.strategy.acp"))

@@ -29,12 +29,13 @@ import numpy as np
 import optax
 
 from mfsample import arg_checks
+from mfsample import settings_checks as sc
 from mfsample.camera import Camera
 from mfsample.planning import poses
 from mfsample.renderer.budget import render_with_budget
 from mfsample.renderer.settings import RenderSettings
 from mfsample.sharding import default_num_devices
-from mfsample.uncertainty import (
+from mfsample.view_uncertainty import (
     check_background,
     check_z,
     sample_gaussians,
@@ -66,15 +67,13 @@ class OptimizeSettings:
   se3_lr_translation: float = 5e-3
 
   def __post_init__(self):
-    arg_checks.check_int("OptimizeSettings.steps", self.steps, minimum=1)
-    arg_checks.check_int("OptimizeSettings.z_drop_step", self.z_drop_step, minimum=0)
-    arg_checks.check_float("OptimizeSettings.z_drop_scale", self.z_drop_scale, minimum=0.0)
+    sc.check_int("OptimizeSettings.steps", self.steps, minimum=1)
+    sc.check_int("OptimizeSettings.z_drop_step", self.z_drop_step, minimum=0)
+    sc.check_float("OptimizeSettings.z_drop_scale", self.z_drop_scale, minimum=0.0)
     for name in ("lr", "se3_lr_rotation", "se3_lr_translation"):
       # 0 is allowed: the pose stays where selection put it (the optimiser's ablation).
-      arg_checks.check_float(f"OptimizeSettings.{name}", getattr(self, name), minimum=0.0)
-    if not isinstance(self.resample_z, bool):
-      raise ValueError(f"OptimizeSettings.resample_z must be True or False, got "
-                       f"{self.resample_z!r}")
+      sc.check_float(f"OptimizeSettings.{name}", getattr(self, name), minimum=0.0)
+    sc.check_bool("OptimizeSettings.resample_z", self.resample_z)
 
 
 class OptimizeResult(NamedTuple):
@@ -146,6 +145,14 @@ def _se3(model, camera0, z, key, background, *, opt, settings, num_devices):
               lambda xi: xi, optimizer, opt, settings, num_devices)
 
 
+@functools.partial(jax.jit, static_argnames=("sphere", "opt", "settings", "num_devices"))
+def _orbit(model, uv0, camera0, z, key, background, *, sphere, opt, settings, num_devices):
+  optimizer = optax.adam(opt.lr)
+  return _run(model, uv0, z, key, background,
+              lambda uv: poses.orbit_camera(uv, camera0, sphere),
+              lambda uv: poses.project_uv(uv, sphere), optimizer, opt, settings, num_devices)
+
+
 def _per_coordinate_adam(lrs):
   """Adam (descent) whose step size is `lrs` [6] per coordinate."""
   def init(params):
@@ -201,7 +208,7 @@ def optimize_spherical(model, uv0, z, *, sphere: poses.SphereSpec, opt=OptimizeS
   Args:
     model: stochastic `mfsample.model.Model`.
     uv0: [2] starting (u, v) (projected onto the valid band first).
-    z: [M, *z_shape] samples (`mfsample.uncertainty.uncertainty_z`; paper M = 2); with
+    z: [M, *z_shape] samples (`mfsample.samplers.sample_z`; paper M = 2); with
       `opt.resample_z` only its shape is used.
     sphere: `poses.SphereSpec` (static; its image size is the optimisation's resolution).
     opt: `OptimizeSettings`.
@@ -246,3 +253,37 @@ def optimize_se3(model, camera0, z, *, opt=OptimizeSettings(),
       lambda s: _se3(model, camera0, z, _key(opt, key), background, opt=opt, settings=s,
                      num_devices=n), settings, max_budget)
   return OptimizeResult(poses.perturb_camera(camera0, params), params, values, traj, settings)
+
+
+def optimize_orbit(model, camera0, z, *, target=(0.0, 0.0, 0.0), v_range=(0.01, 0.99),
+                   opt=OptimizeSettings(), settings: RenderSettings = RenderSettings(),
+                   background=None, num_devices=None, max_budget=1 << 24,
+                   key=None) -> OptimizeResult:
+  """Maximises U over the sphere about `target` through `camera0` (the paper's ascent from
+  a start pose): the camera keeps its distance to `target` and looks at it (up +z), with
+  `camera0`'s intrinsics; (u, v) as `poses.spherical_camera`, v clamped to `v_range`.
+
+  Returns:
+    `OptimizeResult` with params = (u, v) [2].
+  """
+  if not isinstance(camera0, Camera) or camera0.batch_shape:
+    raise ValueError("camera0 must be one unbatched Camera, got "
+                     + (f"a batch {camera0.batch_shape}" if isinstance(camera0, Camera)
+                        else type(camera0).__name__))
+  arg_checks.check_shape("target", target, (3,))
+  arg_checks.check_finite("target", np.asarray(target, np.float64))
+  background, n = _check_common(model, z, background, num_devices, max_budget)
+  center = tuple(float(c) for c in np.asarray(target, np.float64))
+  eye = np.asarray(camera0.center, np.float64)
+  radius = float(np.linalg.norm(eye - np.asarray(center)))
+  if not radius > 0:
+    raise ValueError(f"camera0 sits at target {list(center)}: the orbit needs a radius > 0")
+  sphere = poses.SphereSpec(center=center, radius=radius, v_range=tuple(v_range),
+                            width=camera0.width, height=camera0.height)
+  dtype = model.params.mean["means"].dtype
+  uv0 = poses.project_uv(jnp.asarray(poses.camera_to_uv(camera0, center), dtype), sphere)
+  (params, values, traj), settings = _with_budget(
+      lambda s: _orbit(model, uv0, camera0, z, _key(opt, key), background, sphere=sphere,
+                       opt=opt, settings=s, num_devices=n), settings, max_budget)
+  return OptimizeResult(poses.orbit_camera(params, camera0, sphere), params, values, traj,
+                        settings)

@@ -123,6 +123,15 @@ def spherical_camera(uv, sphere: SphereSpec) -> Camera:
                         sphere.height)
 
 
+def orbit_camera(uv, reference: Camera, sphere: SphereSpec) -> Camera:
+  """The camera at `uv` [2] on `sphere` looking at its centre (up +z) with the intrinsics and
+  image size of `reference` (unbatched): a start pose moved along its orbit.
+  Differentiable w.r.t. `uv`."""
+  pose = spherical_camera(uv, sphere).world_to_camera
+  return Camera(pose, reference.fx, reference.fy, reference.cx, reference.cy,
+                reference.width, reference.height)
+
+
 def camera_to_uv(camera: Camera, center=(0.0, 0.0, 0.0)):
   """[..., 2] (u, v) of camera centres around `center` (numpy, u in [0, 1))."""
   arg_checks.check_shape("center", center, (3,))
@@ -194,14 +203,6 @@ def _exp_coefficients(theta_sq):
   c = jnp.where(small, 1.0 / 6.0 - theta_sq / 120.0 + theta_sq**2 / 5040.0,
                 (t - jnp.sin(t)) / (t_sq * t))
   return a, b, c
-
-
-def so3_exp(omega):
-  """[..., 3] axis-angle -> [..., 3, 3] rotation (Rodrigues)."""
-  w = hat(omega)
-  a, b, _ = _exp_coefficients(jnp.sum(omega * omega, axis=-1))
-  eye = jnp.eye(3, dtype=omega.dtype)
-  return eye + a[..., None, None] * w + b[..., None, None] * (w @ w)
 
 
 def se3_exp(xi):

@@ -96,7 +96,7 @@ def record_rounds(strategy, directory, run, seed, *, keep_models, keep):
     state = {}
     if keep_models and isinstance(model, Model):
       state = model
-      meta["model"] = {"sampler": model.spec.kind}
+      meta["model"] = {"sampler": model.spec.to_dict()}
     ckpt.save_checkpoint(run_dir, state, meta, keep=max(int(keep), 1))
     return choice
 

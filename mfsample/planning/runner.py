@@ -22,6 +22,7 @@ first round of the three "Ours" variants) are shared through an in-memory cache.
 """
 
 import collections
+import dataclasses
 import hashlib
 import time
 from typing import NamedTuple
@@ -32,17 +33,18 @@ import numpy as np
 
 from mfsample import interrupts, jobs
 from mfsample import metrics as metrics_lib
-from mfsample import uncertainty as unc
+from mfsample import view_uncertainty as unc
 from mfsample.baselines import activenerf
+from mfsample.config_blocks import data_spec, speed_only_fields
 from mfsample.data._io import area_downscale
 from mfsample.data.views import Views
-from mfsample.model import STOCHASTIC_KINDS
+from mfsample.jobs import Budgets
 from mfsample.planning import figures, poses, strategies, tables, training
 from mfsample.planning import rounds as rounds_lib
-from mfsample.planning.config import validate
+from mfsample.planning.config import strategy_settings, validate
 from mfsample.planning.pool import Pool, make_pool, stack_cameras
-from mfsample.renderer.budget import Budgets
-from mfsample.train.config import render_settings, speed_only_fields
+from mfsample.samplers import STOCHASTIC_KINDS, sample_z
+from mfsample.train.config import recipe
 from mfsample.train.evaluate import mean_metrics
 from mfsample.train.step import clear_compiled_steps
 
@@ -105,49 +107,49 @@ def as_views(selected, downscale=1) -> Views:
   return Views(images, cameras, names=tuple(str(view_key(s)) for s in selected))
 
 
-def round_config(config, kind):
-  """The training config of the rounds for a model kind (a copy).
+def round_recipe(config, kind):
+  """The `Recipe` of the round models of a kind.
 
-  "stochastic" keeps the config's sampler; "lowrank", "diagonal" or "block" replace it.
+  "stochastic" keeps the round config's sampler; "lowrank", "diagonal" or "block" replace
+  it; "deterministic" and "variance" (ActiveNeRF's) are plain 3DGS.
 
   Re-initialised rounds (the authors' code) train `rounds.steps` steps each. With
   `rounds.warm_start` (the paper's text: one run, a camera added every so many steps) the
   schedules span the whole run: `rounds.first_steps` + (max_views - 2) * `rounds.steps`.
   """
-  cfg = config.round_train.copy_and_resolve_references()
   r = config.rounds
-  with cfg.unlocked():
-    if kind in ("deterministic", "variance"):
-      cfg.sampler.kind = "deterministic"
-    elif kind in STOCHASTIC_KINDS:  # a strategy that names its sampler
-      cfg.sampler.kind = kind
-    if r.warm_start:
-      cfg.train.num_steps = int(r.first_steps) + (int(config.max_views) - 2) * int(r.steps)
-    else:
-      cfg.train.num_steps = int(r.steps)
-  return cfg
+  base = recipe(config.round_train, prefix="config.round_train")
+  spec = base.spec
+  if kind in ("deterministic", "variance"):
+    spec = dataclasses.replace(spec, kind="deterministic")
+  elif kind in STOCHASTIC_KINDS:  # a strategy that names its sampler
+    spec = dataclasses.replace(spec, kind=kind)
+  steps = int(r.steps)
+  if r.warm_start:
+    steps = int(r.first_steps) + (int(config.max_views) - 2) * int(r.steps)
+  return base._replace(spec=spec, settings=base.settings.replace(num_steps=steps))
+
+
+def _round_budget(kind):
+  return f"round_{kind}"
 
 
 class Trainer:
   """Trains (and caches) models for the rounds and the final evaluation.
 
-  Host-side bookkeeping only: the cache maps (kind, seed, view keys) to trained models, and
-  the trainer keeps the render budget that sufficed for each kind of model it trains
-  (`settings_of`), so later trainings start from it.
+  Host-side memo only: the cache maps (kind, seed, view keys) to trained models. The render
+  budgets that sufficed for each kind of model travel in the caller's `Budgets` (purposes
+  "round_<kind>" and "final"): every method takes the record and returns the new one.
   """
 
   def __init__(self, config, pool: Pool, cache_size=24):
     self.config = config
     self.pool = pool
+    self.strategy = strategy_settings(config)
+    self.final = recipe(config.final_train, prefix="config.final_train")
     self.cache = collections.OrderedDict()
     self.cache_size = cache_size
-    self._budgets = {}  # ("round", kind) or "final" -> RenderSettings; only `_train` grows it
     self.train_seconds = 0.0
-
-  def settings_of(self, budget):
-    """The `RenderSettings` that sufficed for the models of `budget` (("round", kind) or
-    "final"), or None before the first of them is trained."""
-    return self._budgets.get(budget)
 
   def _cached(self, key, make):
     if key in self.cache:
@@ -159,32 +161,30 @@ class Trainer:
       self.cache.popitem(last=False)
     return value
 
-  def _train(self, cfg, selected, seed, budget, downscale=1, state=None, stop_at=None):
-    """Trains `cfg` on the `selected` views; the render budget that sufficed is kept under
-    `budget` for the next call.
+  def _train(self, plan, selected, seed, render, downscale=1, state=None, stop_at=None):
+    """Trains `plan` (a `Recipe`) on the `selected` views, its renders starting from
+    `render` (None: the recipe's own budget).
 
     A fixed-shape model trains padded to `max_views` image slots (one compilation for every
     view count; `state` / `stop_at` continue one, see `training.train_on_views`); a model
-    that densifies changes shape anyway and trains with `mfsample.train.train` as it is.
+    that densifies changes shape anyway and trains with `run_training` as it is.
     """
     views = as_views(selected, downscale)
     t0 = time.perf_counter()
-    if training.densifies(cfg):
+    if plan.densifies():
       clear_compiled_steps()  # the earlier models' shapes would pile up (see there)
-      trained = training.train_densified(cfg, views, seed=seed, bounds=self.pool.bounds,
-                                         settings=self._budgets.get(budget),
-                                         points=self.pool.points)
+      trained = training.train_densified(plan, views, seed=seed, bounds=self.pool.bounds,
+                                         render=render, points=self.pool.points)
     else:
-      trained = training.train_on_views(cfg, views, seed=seed, bounds=self.pool.bounds,
-                                        pad_to=self.config.max_views,
-                                        settings=self._budgets.get(budget), state=state,
-                                        stop_at=stop_at, points=self.pool.points)
+      trained = training.train_on_views(plan, views, seed=seed, bounds=self.pool.bounds,
+                                        pad_to=self.config.max_views, render=render,
+                                        state=state, stop_at=stop_at, points=self.pool.points)
     self.train_seconds += time.perf_counter() - t0
-    self._budgets[budget] = trained.settings
     return trained
 
-  def round_state(self, base, selected, seed):
-    """`training.Trained` of a model of kind `base` after the round on `selected` (cached).
+  def round_state(self, base, selected, seed, budgets: Budgets):
+    """(`training.Trained` of a model of kind `base` after the round on `selected`
+    (cached), budgets).
 
     Warm start: the previous round's state (recursively) continued for `rounds.steps` more
     steps on the larger view set; otherwise a fresh model trained `rounds.steps` steps,
@@ -192,61 +192,62 @@ class Trainer:
     """
     keys = tuple(view_key(s) for s in selected)
     r = self.config.rounds
+    plan = round_recipe(self.config, base)
 
     def make():
-      cfg = round_config(self.config, base)
+      nonlocal budgets
       state, stop_at = None, int(r.steps)
-      if training.densifies(cfg):
+      if plan.densifies():
         if r.warm_start:
           raise ValueError("rounds.warm_start continues one padded state, which cannot "
                            "densify: set round_train.densify.start >= rounds.steps")
       elif r.warm_start:
         stop_at = int(r.first_steps)
         if len(selected) > 1:
-          prev = self.round_state(base, selected[:-1], seed)
+          prev, budgets = self.round_state(base, selected[:-1], seed, budgets)
           state, stop_at = prev.state, int(prev.state.step) + int(r.steps)
-      return self._train(cfg, selected, seed, ("round", base), int(r.downscale), state,
-                         stop_at)
+      return self._train(plan, selected, seed, budgets.get(_round_budget(base)),
+                         int(r.downscale), state, stop_at)
 
-    return self._cached(("round", base, seed, keys), make)
+    trained = self._cached(("round", base, seed, keys), make)
+    return trained, budgets.replace(**{_round_budget(base): trained.settings})
 
-  def round_model(self, kind, selected, seed):
-    """The model of `kind` for the round on the `selected` views (cached)."""
+  def round_model(self, kind, selected, seed, budgets: Budgets):
+    """(The model of `kind` for the round on the `selected` views (cached), budgets)."""
     base = "deterministic" if kind == "variance" else kind
+    trained, budgets = self.round_state(base, selected, seed, budgets)
     if kind != "variance":
-      return self.round_state(base, selected, seed).model
+      return trained.model, budgets
     keys = tuple(view_key(s) for s in selected)
 
     def make():
-      trained = self.round_state(base, selected, seed)
-      a = self.config.strategy.activenerf
+      a = self.strategy.activenerf
       t0 = time.perf_counter()
       vmodel, _ = activenerf.fit_variance(
           trained.model, as_views(selected, int(self.config.rounds.downscale)),
           settings=trained.settings,
-          background=self.pool.background, steps=int(a.steps), lr=float(a.lr),
-          prior_var=float(a.prior_var), beta_min=float(a.beta_min),
-          prior_weight=float(a.prior_weight), seed=seed, pad_to=self.config.max_views)
+          background=self.pool.background, steps=a.steps, lr=a.lr,
+          prior_var=a.prior_var, beta_min=a.beta_min,
+          prior_weight=a.prior_weight, seed=seed, pad_to=self.config.max_views)
       self.train_seconds += time.perf_counter() - t0
       return vmodel
 
-    return self._cached(("variance", seed, keys), make)
+    return self._cached(("variance", seed, keys), make), budgets
 
-  def final_model(self, selected, seed):
-    """The plain model of the final evaluation, trained on `selected` (cached)."""
+  def final_model(self, selected, seed, budgets: Budgets):
+    """(The plain model of the final evaluation, trained on `selected` (cached), budgets)."""
     keys = tuple(view_key(s) for s in selected)
-
-    def make():
-      return self._train(self.config.final_train, selected, seed, "final").model
-
-    return self._cached(("final", seed, keys), make)
+    trained = self._cached(("final", seed, keys), lambda: self._train(
+        self.final, selected, seed, budgets.get("final")))
+    return trained.model, budgets.replace(final=trained.settings)
 
 
 def scoring_start(config):
   """Starting settings of the strategies' renders (scores, ascents): the round models'
   renderer (`round_train.render`: footprint rule, compositor) with a small budget, grown
   on overflow."""
-  return render_settings(config.round_train.render).holding_budget(1 << 12)
+  return recipe(config.round_train, prefix="config.round_train").settings.render \
+      .holding_budget(1 << 12)
 
 
 def choose_next(strategy, pool: Pool, config, seed, trainer: Trainer, budgets: Budgets,
@@ -268,17 +269,19 @@ def choose_next(strategy, pool: Pool, config, seed, trainer: Trainer, budgets: B
     available: [C] bool, candidates not selected yet.
 
   Returns:
-    the strategy's `strategies.Choice` (its `budgets`: the ones to use next).
+    (the strategy's `strategies.Choice`, the `Budgets` to use next).
   """
   model = None
   if strategy.model_kind is not None:
-    model = trainer.round_model(strategy.model_kind, selected, seed)
+    model, budgets = trainer.round_model(strategy.model_kind, selected, seed, budgets)
   inputs = strategies.Inputs(
       model=model, train_cameras=stack_cameras([s.camera for s in selected]),
       candidates=pool.candidates.cameras, available=available, sphere=pool.sphere,
-      bounds=pool.bounds, background=pool.background, budgets=budgets,
+      bounds=pool.bounds, background=pool.background,
+      renders=strategies.Renders(budgets.get("score"), budgets.get("optimize")),
       start=scoring_start(config), max_views=int(config.max_views))
-  return strategy.select(inputs, strategies.strategy_key(seed, strategy.name, len(selected)))
+  choice = strategy.select(inputs, strategies.strategy_key(seed, strategy.name, len(selected)))
+  return choice, budgets.replace(score=choice.renders.score, optimize=choice.renders.optimize)
 
 
 def plan_views(strategy, pool: Pool, config, seed, trainer: Trainer, budgets=Budgets(),
@@ -308,8 +311,8 @@ def plan_views(strategy, pool: Pool, config, seed, trainer: Trainer, budgets=Bud
   while len(selected) < int(config.max_views):
     interrupts.check(f"in round {len(selected)} of {strategy.name}, seed {seed}")
     t0 = time.perf_counter()
-    choice = choose_next(strategy, pool, config, seed, trainer, budgets, selected, available)
-    budgets = choice.budgets
+    choice, budgets = choose_next(strategy, pool, config, seed, trainer, budgets, selected,
+                                  available)
     if choice.index is not None:
       image = np.asarray(cands.images[choice.index])
       available[choice.index] = False
@@ -373,29 +376,6 @@ def run_record(strategy, seed, selected, metrics, seconds, pool):
   }
 
 
-def selected_from_record(record, pool):
-  """The views of a run record (`run_record`) as `Selected`, to train on them again.
-
-  Candidates come from the pool; new poses (the optimising strategies) are captured again
-  by the pool's oracle. Scores, timings and extras are not restored.
-  """
-  from mfsample.camera import Camera
-
-  cands = pool.candidates
-  out = []
-  for index, w2c in zip(record["indices"], record["world_to_camera"], strict=True):
-    if index is not None:
-      out.append(candidate_view(pool, index))
-      continue
-    if pool.oracle is None:
-      raise ValueError(f"{record['strategy']} chose a new pose but the pool has no oracle.")
-    ref = cands.cameras[0]
-    camera = Camera.create(np.asarray(w2c, np.float32), ref.fx, ref.fy, ref.cx, ref.cy,
-                           ref.width, ref.height)
-    out.append(Selected(None, camera, np.asarray(pool.oracle(camera)), float("nan"), 0.0, {}))
-  return out
-
-
 # ------------------------------------------------------------------ the loop
 
 
@@ -414,16 +394,17 @@ def run_camera_planning(config, workdir):
   """
   t_start = time.perf_counter()
   with jobs.open_workdir(JOB, config, workdir) as wd:
-    pool = make_pool(config.data)
+    pool = make_pool(data_spec(config.data))
     if int(config.max_views) > len(pool.candidates):
       raise ValueError(f"config.max_views = {config.max_views}: the pool has only "
                        f"{len(pool.candidates)} candidates")
     initial_index(config, 0, len(pool.candidates))  # refuses an initial_view beyond the pool
     wd.write_config()
+    settings = strategy_settings(config)
     names = list(config.strategies)
     skipped = []
     if pool.oracle is None:
-      skipped = [n for n in names if strategies.make_strategy(n, config).new_poses]
+      skipped = [n for n in names if strategies.make_strategy(n, settings).new_poses]
       names = [n for n in names if n not in skipped]
     # Each (seed, strategy) once, even if a caller skipped `validate`.
     todo = list(dict.fromkeys((int(seed), name) for seed in config.seeds for name in names))
@@ -443,7 +424,7 @@ def run_camera_planning(config, workdir):
         records.append(record)
         bar.update(rounds + len(eval_views))
         continue
-      strategy = strategies.make_strategy(name, config)
+      strategy = strategies.make_strategy(name, settings)
       if wd.writes:  # the rounds the viewer shows, recorded by the writing process only
         strategy = rounds_lib.record_rounds(
             strategy, wd.file(rounds_lib.DIRECTORY), run_name(name, seed), seed,
@@ -454,11 +435,11 @@ def run_camera_planning(config, workdir):
                                      on_round=lambda *_: bar.update(1))
       metrics = {}
       for n in eval_views:
-        model = trainer.final_model(selected[:n], seed)
-        metrics[n], settings = mean_metrics(
+        model, budgets = trainer.final_model(selected[:n], seed, budgets)
+        metrics[n], eval_settings = mean_metrics(
             model, pool.test, background=pool.background, lpips_fn=lpips_fn,
-            settings=budgets.eval or trainer.settings_of("final"))
-        budgets = budgets.replace(eval=settings)
+            settings=budgets.first("eval", "final"))
+        budgets = budgets.replace(eval=eval_settings)
         bar.update(1)
       record = run_record(strategy, seed, selected, metrics, time.perf_counter() - t_run,
                           pool)
@@ -514,33 +495,34 @@ def landscape(config, pool: Pool, trainer: Trainer, budgets: Budgets):
   cands = pool.candidates
   first = initial_index(config, seed, len(cands))
   sel = [candidate_view(pool, first)]
-  model = trainer.round_model("stochastic", sel, seed)
+  model, budgets = trainer.round_model("stochastic", sel, seed, budgets)
   f = config.figures
-  down = int(config.strategy.optimize.downscale)
+  settings = trainer.strategy
+  down = settings.optimize.downscale
   sphere = pool.sphere.replace(width=max(pool.sphere.width // down, 1),
                                height=max(pool.sphere.height // down, 1))
   grid, u, v = poses.uv_grid(sphere, int(f.landscape_u), int(f.landscape_v))
   cams = poses.spherical_camera(jnp.asarray(grid.reshape(-1, 2)), sphere)
-  z = unc.uncertainty_z(model, int(config.strategy.ours.select_samples),
-                        int(config.strategy.ours.z_seed))
-  scores, settings = unc.score_cameras(
-      model, cams, z, settings=budgets.first("landscape", "score",
-                                             default=trainer.settings_of(("round", "stochastic"))),
+  z = sample_z(model, settings.ours.select_samples, seed=settings.ours.z_seed)
+  scores, grown = unc.score_cameras(
+      model, cams, z, settings=budgets.first("landscape", "score", _round_budget("stochastic")),
       background=jnp.asarray(pool.background))
-  budgets = budgets.replace(landscape=settings)
+  budgets = budgets.replace(landscape=grown)
   out = {"values": np.asarray(scores.values).reshape(grid.shape[:2]), "u": u, "v": v,
          "train_uv": poses.camera_to_uv(sel[0].camera, pool.sphere.center)[None],
          "candidates_uv": poses.camera_to_uv(cands.cameras, pool.sphere.center)}
   if f.landscape_trajectory and pool.oracle is not None:
-    strategy = strategies.make_strategy("ours_opt_rnd", config)
+    strategy = strategies.make_strategy("ours_opt_rnd", settings)
     inputs = strategies.Inputs(model, stack_cameras([sel[0].camera]), cands.cameras,
                                np.ones(len(cands), bool), pool.sphere, pool.bounds,
-                               pool.background, budgets, scoring_start(config))
+                               pool.background,
+                               strategies.Renders(budgets.get("score"), budgets.get("optimize")),
+                               scoring_start(config))
     key = jax.random.fold_in(jax.random.PRNGKey(seed), LANDSCAPE_STREAM)
     choice = strategy.select(inputs, key)
     out["trajectory"] = choice.info["trajectory"]
     out["trajectory_values"] = choice.info["values"]
-    budgets = choice.budgets
+    budgets = budgets.replace(score=choice.renders.score, optimize=choice.renders.optimize)
   return out, budgets
 
 
@@ -551,5 +533,5 @@ LANDSCAPE_STREAM = 1234
 FREE_FIELDS = ("seeds", "strategies", "progress", "figures", "data.progress",
                "paired_references") + speed_only_fields("round_train") + speed_only_fields(
                    "final_train")
-JOB = jobs.Job("camera planning", run_camera_planning, validate, FREE_FIELDS, ("runs",),
-               report=jobs.table_report)
+JOB = jobs.Job("camera planning", "camera_planning", run_camera_planning, validate,
+               FREE_FIELDS, ("runs",), report=jobs.table_report)

@@ -23,6 +23,7 @@ be captured by an oracle), and a pure `select(inputs, key) -> Choice`.
 |               |                   | its start and the poses it visited                       |
 """
 
+import dataclasses
 from collections.abc import Callable
 from typing import NamedTuple
 
@@ -30,14 +31,178 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from mfsample import settings_checks as sc
 from mfsample import streams
-from mfsample import uncertainty as unc
+from mfsample import view_uncertainty as unc
 from mfsample.baselines import acp, activenerf, fisher
 from mfsample.camera import Camera
+from mfsample.groups import GROUPS
 from mfsample.planning import optimize, poses
 from mfsample.renderer import RenderSettings
-from mfsample.renderer.budget import Budgets
+from mfsample.samplers import STOCHASTIC_KINDS, sample_z
 from mfsample.sharding import default_num_devices
+
+# ------------------------------------------------------------------ settings
+
+
+@dataclasses.dataclass(frozen=True)
+class OursSettings:
+  """Ours (Sel.): U of every candidate (Eq. 10).
+
+  Attributes:
+    select_samples: M of the candidates' U (paper: 2).
+    z_seed: Sobol scrambling seed of the U samples (authors' code: 6174).
+    chunk_size: candidates vmapped together (1: sequential, cheapest on a CPU).
+    score_downscale: candidates are scored at 1 / this of the image size.
+  """
+
+  select_samples: int = 8
+  z_seed: int = 6174
+  chunk_size: int = 1
+  score_downscale: int = 2
+
+  def __post_init__(self):
+    sc.check_int("OursSettings.select_samples", self.select_samples, minimum=2)  # U of one: 0
+    sc.check_int("OursSettings.z_seed", self.z_seed, minimum=0, maximum=2**32 - 1)
+    sc.check_int("OursSettings.chunk_size", self.chunk_size, minimum=1)
+    sc.check_int("OursSettings.score_downscale", self.score_downscale, minimum=1)
+
+
+@dataclasses.dataclass(frozen=True)
+class AscentSettings:
+  """The optimising strategies: Adam on -U over the camera sphere (paper Sec. 4.4).
+
+  Attributes:
+    samples: M during the ascent (paper: 2).
+    steps, lr, z_drop_step, z_drop_scale, resample_z: `optimize.OptimizeSettings`'.
+    downscale: the ascent renders at 1 / this of the image size.
+    sampler: the round model's sampler ("": the rounds' own; a stochastic kind).
+    best_every: Ours (Opt. Best) scores every this-th pose of the ascent (and its end).
+  """
+
+  samples: int = 2
+  steps: int = 60
+  lr: float = 3.3e-3
+  z_drop_step: int = 30
+  z_drop_scale: float = 0.1
+  downscale: int = 2
+  resample_z: bool = False
+  sampler: str = ""
+  best_every: int = 10
+
+  def __post_init__(self):
+    sc.check_int("AscentSettings.samples", self.samples, minimum=2)
+    sc.check_int("AscentSettings.steps", self.steps, minimum=0)
+    # 0: the pose stays at selection's choice (the optimiser's ablation).
+    sc.check_float("AscentSettings.lr", self.lr, minimum=0.0)
+    sc.check_int("AscentSettings.z_drop_step", self.z_drop_step, minimum=0)
+    sc.check_float("AscentSettings.z_drop_scale", self.z_drop_scale, above=0.0, maximum=1.0)
+    sc.check_int("AscentSettings.downscale", self.downscale, minimum=1)
+    sc.check_bool("AscentSettings.resample_z", self.resample_z)
+    sc.check_choice("AscentSettings.sampler", self.sampler, ("",) + STOCHASTIC_KINDS)
+    sc.check_int("AscentSettings.best_every", self.best_every, minimum=1)
+
+  def optimize_settings(self):
+    """The `optimize.OptimizeSettings` of the ascent."""
+    return optimize.OptimizeSettings(steps=self.steps, lr=self.lr,
+                                     z_drop_step=self.z_drop_step,
+                                     z_drop_scale=self.z_drop_scale, resample_z=self.resample_z)
+
+
+@dataclasses.dataclass(frozen=True)
+class FisherSettings:
+  """FisherRF (`baselines.fisher`).
+
+  Attributes:
+    probes: Rademacher probes (backward passes) per candidate.
+    train_probes: probes per training view (H_train is in a denominator).
+    reg: lambda of sum H_cand / (H_train + lambda).
+    groups: the parameter groups (FisherRF leaves out rotations).
+    score_downscale: candidates are scored at 1 / this of the image size.
+  """
+
+  probes: int = 1
+  train_probes: int = 8
+  reg: float = 1e-6
+  groups: tuple = ("means", "log_scales", "opacity_logits", "sh_dc", "sh_rest")
+  score_downscale: int = 2
+
+  def __post_init__(self):
+    sc.check_int("FisherSettings.probes", self.probes, minimum=1)
+    sc.check_int("FisherSettings.train_probes", self.train_probes, minimum=1)
+    sc.check_float("FisherSettings.reg", self.reg, above=0.0)
+    sc.set_field(self, "groups", sc.check_names("FisherSettings.groups", self.groups, GROUPS,
+                                                min_length=1))
+    sc.check_int("FisherSettings.score_downscale", self.score_downscale, minimum=1)
+
+
+@dataclasses.dataclass(frozen=True)
+class ActiveNerfSettings:
+  """ActiveNeRF-style rendered variance (`baselines.activenerf`).
+
+  Attributes:
+    steps, lr: Adam steps and rate of the per-Gaussian log-variance fit (one view each).
+    prior_var: variance of Gaussians no view constrains.
+    beta_min: variance floor of every pixel.
+    prior_weight: weight of the quadratic prior on the log-variance.
+    score_downscale: candidates are scored at 1 / this of the image size.
+  """
+
+  steps: int = 40
+  lr: float = 0.05
+  prior_var: float = 0.05
+  beta_min: float = 1e-3
+  prior_weight: float = 1e-3
+  score_downscale: int = 2
+
+  def __post_init__(self):
+    sc.check_int("ActiveNerfSettings.steps", self.steps, minimum=0)
+    for name in ("lr", "prior_var", "beta_min"):
+      sc.check_float(f"ActiveNerfSettings.{name}", getattr(self, name), above=0.0)
+    sc.check_float("ActiveNerfSettings.prior_weight", self.prior_weight, minimum=0.0)
+    sc.check_int("ActiveNerfSettings.score_downscale", self.score_downscale, minimum=1)
+
+
+@dataclasses.dataclass(frozen=True)
+class AcpSettings:
+  """ACP (`baselines.acp`): grid coverage and angular uniformity.
+
+  Attributes:
+    resolution: grid cells per axis (Kopanas & Drettakis: 32^3).
+    bins: direction bins (Fibonacci sphere).
+    weight: weight of angular uniformity against coverage.
+    near: cells nearer than this (camera z) are not observed.
+  """
+
+  resolution: int = 32
+  bins: int = 64
+  weight: float = 1.0
+  near: float = 0.2
+
+  def __post_init__(self):
+    sc.check_int("AcpSettings.resolution", self.resolution, minimum=1)
+    sc.check_int("AcpSettings.bins", self.bins, minimum=1)
+    sc.check_float("AcpSettings.weight", self.weight, minimum=0.0)
+    sc.check_float("AcpSettings.near", self.near, minimum=0.0)
+
+
+@dataclasses.dataclass(frozen=True)
+class StrategySettings:
+  """Every strategy's settings (the planning config's `strategy` block, typed)."""
+
+  ours: OursSettings = OursSettings()
+  optimize: AscentSettings = AscentSettings()
+  fisher: FisherSettings = FisherSettings()
+  activenerf: ActiveNerfSettings = ActiveNerfSettings()
+  acp: AcpSettings = AcpSettings()
+
+
+class Renders(NamedTuple):
+  """The render settings that sufficed before for a strategy's two kinds of render (None:
+  not known yet; the strategy starts from `Inputs.start` and grows the budget)."""
+
+  score: RenderSettings | None = None  # scoring candidates: U, FisherRF, ActiveNeRF
+  optimize: RenderSettings | None = None  # the camera ascent's renders
 
 
 class Inputs(NamedTuple):
@@ -52,8 +217,7 @@ class Inputs(NamedTuple):
     sphere: `poses.SphereSpec` of the camera sphere.
     bounds: (low [3], high [3]) scene box.
     background: RGB tuple.
-    budgets: `Budgets` that sufficed before (`score`, `optimize`); unknown ones start from
-      `start` and grow.
+    renders: `Renders` that sufficed before; unknown ones start from `start` and grow.
     start: `RenderSettings` of a first render (the round models' renderer, a small budget).
     max_views: the protocol's largest number of views: per-view arrays are padded to it so
       that one compilation serves every round (None: no padding).
@@ -66,7 +230,7 @@ class Inputs(NamedTuple):
   sphere: poses.SphereSpec
   bounds: tuple
   background: tuple
-  budgets: Budgets = Budgets()
+  renders: Renders = Renders()
   start: RenderSettings | None = None
   max_views: int | None = None
 
@@ -79,14 +243,14 @@ class Choice(NamedTuple):
     camera: the chosen unbatched `Camera`.
     score: the strategy's score of the choice (U, Fisher score, gain, ...; nan if none).
     info: extras: "scores" [C], "trajectory", ...
-    budgets: the inputs' `Budgets`, with those the strategy grew.
+    renders: the inputs' `Renders`, with those the strategy grew.
   """
 
   index: int | None
   camera: Camera
   score: float
   info: dict
-  budgets: Budgets = Budgets()
+  renders: Renders = Renders()
 
 
 class Strategy(NamedTuple):
@@ -108,15 +272,16 @@ class Strategy(NamedTuple):
 _START = RenderSettings(max_intersections=1 << 12)
 
 
-def _settings(inputs, purpose):
-  """The settings that sufficed for `purpose` last time, else the caller's starting settings
-  (the round models' renderer, with a small budget), else `_START`."""
-  return inputs.budgets.first(purpose) or inputs.start or _START
+def _settings(inputs, kind):
+  """The settings that sufficed for the renders of `kind` ("score", "optimize") last time,
+  else the caller's starting settings (the round models' renderer, with a small budget), else
+  `_START`."""
+  return getattr(inputs.renders, kind) or inputs.start or _START
 
 
-def _small(cameras, cfg):
-  """Cameras at 1 / cfg.score_downscale of the image size: candidates are scored there."""
-  return poses.downscale_camera(cameras, int(cfg.get("score_downscale", 1)))
+def _small(cameras, downscale):
+  """Cameras at 1 / `downscale` of the image size: candidates are scored there."""
+  return poses.downscale_camera(cameras, int(downscale))
 
 
 def _pick(inputs, scores, extra=None, **grown):
@@ -128,7 +293,8 @@ def _pick(inputs, scores, extra=None, **grown):
   i = int(np.argmax(masked))
   info = {"scores": scores}
   info.update(extra or {})
-  return Choice(i, inputs.candidates[i], float(scores[i]), info, inputs.budgets.replace(**grown))
+  return Choice(i, inputs.candidates[i], float(scores[i]), info,
+                inputs.renders._replace(**grown))
 
 
 def _rng(key):
@@ -138,9 +304,8 @@ def _rng(key):
 # ------------------------------------------------------------------ model-free
 
 
-def random_strategy(cfg=None) -> Strategy:
+def random_strategy() -> Strategy:
   """Uniformly random among the unused candidates."""
-  del cfg
 
   def select(inputs, key):
     scores = _rng(key).uniform(size=len(inputs.available))
@@ -149,9 +314,8 @@ def random_strategy(cfg=None) -> Strategy:
   return Strategy("random", None, False, select)
 
 
-def farthest_strategy(cfg=None) -> Strategy:
+def farthest_strategy() -> Strategy:
   """Farthest point: max over candidates of the min distance to the training centres."""
-  del cfg
 
   def select(inputs, key):
     del key
@@ -163,19 +327,15 @@ def farthest_strategy(cfg=None) -> Strategy:
   return Strategy("farthest", None, False, select)
 
 
-def acp_strategy(cfg) -> Strategy:
-  """ACP: the candidate that most improves grid coverage and angular uniformity (`acp`).
-
-  cfg fields: resolution (grid cells per axis), bins (direction bins), weight (of the
-  uniformity term), near (camera z below which cells are not seen).
-  """
-  directions = acp.fibonacci_directions(int(cfg.bins))
+def acp_strategy(cfg: AcpSettings) -> Strategy:
+  """ACP: the candidate that most improves grid coverage and angular uniformity (`acp`)."""
+  directions = acp.fibonacci_directions(cfg.bins)
   memo = {}  # the pool's observations, computed once (host-side, keyed by the poses)
 
   def select(inputs, key):
     del key
-    points = acp.grid_points(*inputs.bounds, resolution=int(cfg.resolution))
-    kw = dict(near=float(cfg.near))
+    points = acp.grid_points(*inputs.bounds, resolution=cfg.resolution)
+    kw = dict(near=cfg.near)
     train = acp.observe(inputs.train_cameras, points, directions, **kw)
     pool_key = (np.asarray(inputs.candidates.world_to_camera).tobytes(),
                 np.asarray(points).tobytes())
@@ -183,7 +343,7 @@ def acp_strategy(cfg) -> Strategy:
       memo.clear()
       memo[pool_key] = acp.observe(inputs.candidates, points, directions, **kw)
     cands = memo[pool_key]
-    gains = acp.acp_gains(train, cands, len(directions), weight=float(cfg.weight))
+    gains = acp.acp_gains(train, cands, len(directions), weight=cfg.weight)
     return _pick(inputs, gains)
 
   return Strategy("acp", None, False, select)
@@ -192,34 +352,30 @@ def acp_strategy(cfg) -> Strategy:
 # ------------------------------------------------------------------ model-based baselines
 
 
-def fisher_strategy(cfg) -> Strategy:
-  """FisherRF on the deterministic model (`fisher`).
-
-  cfg fields: probes (per candidate), train_probes (per training view), reg (lambda),
-  groups (parameter groups), score_downscale (image size divisor while scoring).
-  """
+def fisher_strategy(cfg: FisherSettings) -> Strategy:
+  """FisherRF on the deterministic model (`fisher`)."""
   def select(inputs, key):
     out, settings = fisher.fisher_scores(
-        inputs.model, _small(inputs.train_cameras, cfg), _small(inputs.candidates, cfg), key,
+        inputs.model, _small(inputs.train_cameras, cfg.score_downscale),
+        _small(inputs.candidates, cfg.score_downscale), key,
         settings=_settings(inputs, "score"), background=inputs.background,
-        num_probes=int(cfg.probes), train_probes=int(cfg.train_probes), reg=float(cfg.reg),
-        groups=tuple(cfg.groups), num_devices=default_num_devices(len(inputs.available)),
-        pad_to=inputs.max_views)
+        num_probes=cfg.probes, train_probes=cfg.train_probes, reg=cfg.reg, groups=cfg.groups,
+        num_devices=default_num_devices(len(inputs.available)), pad_to=inputs.max_views)
     return _pick(inputs, out.values, score=settings)
 
   return Strategy("fisher", "deterministic", False, select)
 
 
-def activenerf_strategy(cfg) -> Strategy:
+def activenerf_strategy(cfg: ActiveNerfSettings) -> Strategy:
   """ActiveNeRF-style: the candidate with the largest rendered variance (`baselines.activenerf`).
 
-  cfg fields: score_downscale (image size divisor while scoring); the variance fit's
-  fields are read by the runner (`runner.Trainer`).
+  The variance fit's settings are the runner's (`runner.Trainer`).
   """
   def select(inputs, key):
     del key
     scores, settings = activenerf.variance_scores(
-        inputs.model, _small(inputs.candidates, cfg), settings=_settings(inputs, "score"),
+        inputs.model, _small(inputs.candidates, cfg.score_downscale),
+        settings=_settings(inputs, "score"),
         num_devices=default_num_devices(len(inputs.available)))
     return _pick(inputs, scores, score=settings)
 
@@ -229,31 +385,28 @@ def activenerf_strategy(cfg) -> Strategy:
 # ------------------------------------------------------------------ ours
 
 
-def _ours_scores(inputs, cfg, cameras=None):
+def _ours_scores(inputs, cfg: OursSettings, cameras=None):
   """U of the candidates (or of `cameras` [B]) as Ours (Sel.) scores them."""
   model = inputs.model
   cameras = inputs.candidates if cameras is None else cameras
-  z = unc.uncertainty_z(model, int(cfg.select_samples), int(cfg.z_seed))
+  z = sample_z(model, cfg.select_samples, seed=cfg.z_seed)
   out, settings = unc.score_cameras(
-      model, _small(cameras, cfg), z, settings=_settings(inputs, "score"),
-      background=jnp.asarray(inputs.background), chunk_size=int(cfg.chunk_size),
+      model, _small(cameras, cfg.score_downscale), z, settings=_settings(inputs, "score"),
+      background=jnp.asarray(inputs.background), chunk_size=cfg.chunk_size,
       num_devices=default_num_devices(cameras.batch_shape[0]))
   return np.asarray(out.values), settings
 
 
-def _optimise(inputs, uv0, cfg, opt_cfg, key):
+def _optimise(inputs, uv0, cfg: OursSettings, opt_cfg: AscentSettings, key):
   model = inputs.model
-  z = unc.uncertainty_z(model, int(opt_cfg.samples), int(cfg.z_seed))
-  down = int(opt_cfg.downscale)
+  z = sample_z(model, opt_cfg.samples, seed=cfg.z_seed)
+  down = opt_cfg.downscale
   sphere = inputs.sphere
   opt_sphere = sphere.replace(width=max(sphere.width // down, 1),
                               height=max(sphere.height // down, 1))
-  settings = optimize.OptimizeSettings(
-      steps=int(opt_cfg.steps), lr=float(opt_cfg.lr), z_drop_step=int(opt_cfg.z_drop_step),
-      z_drop_scale=float(opt_cfg.z_drop_scale),
-      resample_z=bool(opt_cfg.resample_z))
   result = optimize.optimize_spherical(
-      model, jnp.asarray(uv0, jnp.float32), z, sphere=opt_sphere, opt=settings,
+      model, jnp.asarray(uv0, jnp.float32), z, sphere=opt_sphere,
+      opt=opt_cfg.optimize_settings(),
       settings=_settings(inputs, "optimize"), background=jnp.asarray(inputs.background),
       key=key)
   camera = poses.spherical_camera(result.params, sphere)  # full resolution
@@ -268,16 +421,12 @@ def _optimise(inputs, uv0, cfg, opt_cfg, key):
   info = {"trajectory": np.asarray(result.trajectory), "values": np.asarray(result.values),
           "uv": np.asarray(result.params), "uv0": np.asarray(uv0),
           "u_start": u_start, "u_end": u_end}
-  return camera, u_end, info, inputs.budgets.replace(optimize=result.settings,
-                                                     score=score_settings)
+  return camera, u_end, info, inputs.renders._replace(optimize=result.settings,
+                                                       score=score_settings)
 
 
-def ours_sel_strategy(cfg) -> Strategy:
-  """Ours (Sel.): the candidate with the highest U (Eq. 10).
-
-  cfg fields: select_samples (M for selection), z_seed (Sobol scrambling seed), chunk_size,
-  score_downscale (image size divisor while scoring).
-  """
+def ours_sel_strategy(cfg: OursSettings) -> Strategy:
+  """Ours (Sel.): the candidate with the highest U (Eq. 10)."""
   def select(inputs, key):
     del key
     scores, settings = _ours_scores(inputs, cfg)
@@ -286,34 +435,29 @@ def ours_sel_strategy(cfg) -> Strategy:
   return Strategy("ours_sel", "stochastic", False, select)
 
 
-def _opt_model_kind(opt_cfg):
+def _opt_model_kind(opt_cfg: AscentSettings):
   return opt_cfg.sampler or "stochastic"
 
 
-def ours_opt_sel_strategy(cfg, opt_cfg) -> Strategy:
-  """Ours (Opt. Sel.): Adam on -U over the camera sphere from the Ours (Sel.) choice.
-
-  opt_cfg fields: samples (M), steps, lr, z_drop_step, z_drop_scale, resample_z (fresh z
-  every step), downscale (the optimisation renders at 1/downscale of the image size),
-  sampler (the round model's sampler; "": the rounds' own).
-  """
+def ours_opt_sel_strategy(cfg: OursSettings, opt_cfg: AscentSettings) -> Strategy:
+  """Ours (Opt. Sel.): Adam on -U over the camera sphere from the Ours (Sel.) choice."""
   def select(inputs, key):
-    _, camera, value, info, budgets = _optimise_from_selection(inputs, cfg, opt_cfg, key)
-    return Choice(None, camera, value, info, budgets)
+    _, camera, value, info, renders = _optimise_from_selection(inputs, cfg, opt_cfg, key)
+    return Choice(None, camera, value, info, renders)
 
   return Strategy("ours_opt_sel", _opt_model_kind(opt_cfg), True, select)
 
 
 def _optimise_from_selection(inputs, cfg, opt_cfg, key):
   """Ours (Sel.)'s choice, and the ascent from it: (start `Choice`, camera, U, info,
-  budgets)."""
+  renders)."""
   scores, settings = _ours_scores(inputs, cfg)
   start = _pick(inputs, scores, score=settings)
   uv0 = poses.camera_to_uv(start.camera, inputs.sphere.center)
-  camera, value, info, budgets = _optimise(inputs._replace(budgets=start.budgets), uv0, cfg,
+  camera, value, info, renders = _optimise(inputs._replace(renders=start.renders), uv0, cfg,
                                            opt_cfg, key)
   info.update(start_index=start.index, start_score=start.score, scores=scores)
-  return start, camera, value, info, budgets
+  return start, camera, value, info, renders
 
 
 def visited_steps(num_steps, every):
@@ -323,7 +467,7 @@ def visited_steps(num_steps, every):
   return np.unique(np.r_[np.arange(every, num_steps + 1, every), num_steps])
 
 
-def ours_opt_best_strategy(cfg, opt_cfg) -> Strategy:
+def ours_opt_best_strategy(cfg: OursSettings, opt_cfg: AscentSettings) -> Strategy:
   """Ours (Opt. Sel.) that keeps the best pose it saw: never a lower U than Ours (Sel.).
 
   The ascent follows the gradient of an M = `opt_cfg.samples` estimate of U at a reduced
@@ -335,30 +479,30 @@ def ours_opt_best_strategy(cfg, opt_cfg) -> Strategy:
   (ties keep the start).
   """
   def select(inputs, key):
-    start, _, _, info, budgets = _optimise_from_selection(inputs, cfg, opt_cfg, key)
-    steps = visited_steps(len(info["trajectory"]) - 1, int(opt_cfg.best_every))
+    start, _, _, info, renders = _optimise_from_selection(inputs, cfg, opt_cfg, key)
+    steps = visited_steps(len(info["trajectory"]) - 1, opt_cfg.best_every)
     visited = poses.spherical_camera(jnp.asarray(info["trajectory"][steps]), inputs.sphere)
-    u_visited, settings = _ours_scores(inputs._replace(budgets=budgets), cfg, visited)
-    budgets = budgets.replace(score=settings)
+    u_visited, settings = _ours_scores(inputs._replace(renders=renders), cfg, visited)
+    renders = renders._replace(score=settings)
     info.update(visited_steps=steps, u_visited=u_visited)
     best = int(np.argmax(u_visited))
     if not u_visited[best] > start.score:
       info["kept_step"] = 0
-      return Choice(start.index, start.camera, start.score, info, budgets)
+      return Choice(start.index, start.camera, start.score, info, renders)
     info["kept_step"] = int(steps[best])
-    return Choice(None, visited[best], float(u_visited[best]), info, budgets)
+    return Choice(None, visited[best], float(u_visited[best]), info, renders)
 
   return Strategy("ours_opt_best", _opt_model_kind(opt_cfg), True, select)
 
 
-def ours_opt_rnd_strategy(cfg, opt_cfg) -> Strategy:
+def ours_opt_rnd_strategy(cfg: OursSettings, opt_cfg: AscentSettings) -> Strategy:
   """Ours (Opt. Rnd.): Adam on -U over the camera sphere from a random pose."""
   def select(inputs, key):
     uv0 = poses.random_uv(_rng(key), 1, inputs.sphere)[0]
     # Fresh z (resample_z) from a key derived from the start's: the start is unchanged.
-    camera, value, info, budgets = _optimise(inputs, uv0, cfg, opt_cfg,
+    camera, value, info, renders = _optimise(inputs, uv0, cfg, opt_cfg,
                                              jax.random.fold_in(key, 1))
-    return Choice(None, camera, value, info, budgets)
+    return Choice(None, camera, value, info, renders)
 
   return Strategy("ours_opt_rnd", _opt_model_kind(opt_cfg), True, select)
 
@@ -368,7 +512,7 @@ class StrategySpec(NamedTuple):
 
   Attributes:
     label: its name in tables and figures (the paper's row).
-    make: (the config's `strategy` block) -> `Strategy`.
+    make: `StrategySettings` -> `Strategy`.
     stream: its random stream (`mfsample.streams`): fixed with the strategy, not its place.
     table1: whether the main job runs it (a row of the paper's Table 1, or random).
   """
@@ -401,11 +545,11 @@ NAMES = tuple(STRATEGIES)
 TABLE1_NAMES = tuple(name for name, spec in STRATEGIES.items() if spec.table1)
 
 
-def make_strategy(name, config) -> Strategy:
-  """The strategy `name` (one of `NAMES`) with its settings from a planning config."""
+def make_strategy(name, settings: StrategySettings = StrategySettings()) -> Strategy:
+  """The strategy `name` (one of `NAMES`) with its `settings`."""
   if name not in STRATEGIES:
     raise ValueError(f"unknown strategy {name!r}; known: {', '.join(NAMES)}")
-  return STRATEGIES[name].make(config.strategy)
+  return STRATEGIES[name].make(settings)
 
 
 def strategy_key(seed, name, round_index):

@@ -19,13 +19,13 @@ import jax.numpy as jnp
 import numpy as np
 
 from mfsample import interrupts
-from mfsample import uncertainty as unc
+from mfsample import view_uncertainty as unc
 from mfsample.camera import Camera
 from mfsample.mean_render import render_mean_views
 from mfsample.metrics import spearman
 from mfsample.planning import poses
 from mfsample.renderer import RenderSettings
-from mfsample.renderer.budget import Budgets, render_with_budget
+from mfsample.renderer.budget import render_with_budget
 
 
 class UError(NamedTuple):
@@ -40,7 +40,8 @@ class UError(NamedTuple):
       fewer than 3 candidates, or a constant side).
     rho_u_angle: Spearman's rho of u against angle (None without training cameras).
     rho_error_angle: Spearman's rho of error against angle (None without either).
-    budgets: the `Budgets` that sufficed (`score`: U; `mean`: the mean renders).
+    score_settings: the `RenderSettings` that sufficed for U.
+    mean_settings: those that sufficed for the mean renders (None without images).
   """
 
   u: np.ndarray
@@ -49,7 +50,8 @@ class UError(NamedTuple):
   rho_u_error: float | None
   rho_u_angle: float | None
   rho_error_angle: float | None
-  budgets: Budgets
+  score_settings: RenderSettings
+  mean_settings: RenderSettings | None
 
 
 def _rho(a, b):
@@ -58,21 +60,22 @@ def _rho(a, b):
 
 
 def u_against_error(model, cameras: Camera, z, *, background, images=None, train_cameras=None,
-                    center=(0.0, 0.0, 0.0), score_downscale=1, budgets=Budgets(),
-                    batch=None, on_batch=None) -> UError:
+                    center=(0.0, 0.0, 0.0), score_downscale=1, score_settings=None,
+                    mean_settings=None, batch=None, on_batch=None) -> UError:
   """U of every candidate camera and, with their images, how well it ranks the model's error.
 
   Args:
     model: a trained `mfsample.model.Model`.
     cameras: `Camera` [B] of the candidates.
-    z: [M, *z_shape] samples of U (`uncertainty.uncertainty_z`).
+    z: [M, *z_shape] samples of U (`mfsample.samplers.sample_z`).
     background: [3] colour behind the Gaussians.
     images: optional [B, H, W, 3] ground truth of the candidates.
     train_cameras: optional `Camera` [V] the model was trained on (the angle to the nearest).
     center: the centre the cameras look at (for the angles).
     score_downscale: U is computed at 1 / score_downscale of the image size (as planning
       scores candidates); the error at full size.
-    budgets: `Budgets` to start from (`score`, `mean`).
+    score_settings: `RenderSettings` U's renders start from (default: a small budget).
+    mean_settings: those the mean renders start from (default: a small budget).
     batch: candidates per call (memory holds one batch's renders; None: all at once).
     on_batch: optional callback(number of candidates done) after every batch (progress).
 
@@ -83,23 +86,21 @@ def u_against_error(model, cameras: Camera, z, *, background, images=None, train
   batch = num if batch is None else max(1, min(int(batch), num))
   bg = jnp.asarray(background, jnp.float32)
   u, error = np.zeros(num), (None if images is None else np.zeros(num))
+  score_settings = score_settings or RenderSettings(max_intersections=1 << 12)
+  mean_settings = mean_settings or RenderSettings(max_intersections=1 << 14)
   for start in range(0, num, batch):
     interrupts.check(f"scoring candidates {start}..")
     # The last batch repeats its last camera up to the batch size: one compilation.
     index = np.minimum(np.arange(start, start + batch), num - 1)
     keep = slice(0, min(batch, num - start))
     chunk = cameras[index]
-    scores, settings = unc.score_cameras(
-        model, poses.downscale_camera(chunk, int(score_downscale)), z,
-        settings=budgets.score or RenderSettings(max_intersections=1 << 12), background=bg,
-        num_devices=1)
-    budgets = budgets.replace(score=settings)
+    scores, score_settings = unc.score_cameras(
+        model, poses.downscale_camera(chunk, int(score_downscale)), z, settings=score_settings,
+        background=bg, num_devices=1)
     u[start:start + batch] = np.asarray(scores.values)[keep]
     if images is not None:
-      (pred, _), settings = render_with_budget(
-          render_mean_views, budgets.mean or RenderSettings(max_intersections=1 << 14), model,
-          chunk, bg, stats_of=lambda out: out[1])
-      budgets = budgets.replace(mean=settings)
+      (pred, _), mean_settings = render_with_budget(
+          render_mean_views, mean_settings, model, chunk, bg, stats_of=lambda out: out[1])
       truth = np.asarray(images)[index]
       error[start:start + batch] = np.mean((np.asarray(pred) - truth) ** 2,
                                            axis=(1, 2, 3))[keep]
@@ -114,4 +115,5 @@ def u_against_error(model, cameras: Camera, z, *, background, images=None, train
         strict=True)), cameras.width, cameras.height)
     v = train_cameras.batch_shape[0]
     angle = poses.angle_to_nearest(both, list(range(v)), center)[v:]
-  return UError(u, error, angle, _rho(u, error), _rho(u, angle), _rho(error, angle), budgets)
+  return UError(u, error, angle, _rho(u, error), _rho(u, angle), _rho(error, angle),
+                score_settings, mean_settings if images is not None else None)

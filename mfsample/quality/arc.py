@@ -10,11 +10,11 @@ so they cannot serve.
 
 import math
 
-import jax.numpy as jnp
 import numpy as np
 
 from mfsample.camera import Camera
-from mfsample.data.views import Views
+from mfsample.config_blocks import data_spec
+from mfsample.data.datasets import capture_views
 
 
 def arc_cameras(arc, width, height) -> Camera:
@@ -50,53 +50,12 @@ def arc_views(data, scene_name):
   """The arc's views of one scene, with alphas and exact depths.
 
   Args:
-    data: the config's `data` block.
+    data: the config's `data` block (its kind must offer depth: `DataKind.offers`).
     scene_name: a `mfsample.scenes` name (ignored for data.kind "synthetic").
 
   Returns:
     (`Views` [num_views] with images, alphas, depths, cameras; (low [3], high [3]), the box
     of the scene where the models' random initial points go).
   """
-  if data.kind not in ARC_KINDS:
-    raise ValueError(f"data.kind must be one of {', '.join(map(repr, ARC_KINDS))}, got "
-                     f"{data.kind!r}")
-  cameras = arc_cameras(data.arc, data.width, data.height)
-  if data.kind == "scene":
-    from mfsample import scenes
-    from mfsample.data import resolve_path
-
-    scene = scenes.get_scene(scene_name)
-    cache = str(resolve_path(data.cache_dir)) if data.get("cache_dir") else None
-    views = scenes.capture_views(scene, cameras, spp=int(data.spp), cache_dir=cache,
-                                 background=tuple(data.background), progress=data.progress)
-    c, r = np.asarray(scene.center, np.float64), float(scene.radius)
-    return views, (c - r, c + r)
-  return _synthetic_views(data, cameras)
-
-
-# Where the arc's views come from: a built-in Mitsuba scene (exact depth from the oracle) or
-# a synthetic shell rendered by mfsample.
-ARC_KINDS = ("scene", "synthetic")
-
-
-def _synthetic_views(data, cameras):
-  """Random ground-truth Gaussians (an opaque shell) rendered by mfsample: depth is the
-  expected depth of that render, alpha its coverage."""
-  from mfsample.data.synthetic import synthetic_scene
-  from mfsample.renderer import RenderSettings, render
-  from mfsample.renderer.budget import render_with_budget
-
-  syn = data.synthetic
-  truth = synthetic_scene(int(syn.num_gaussians), int(syn.seed), radius=float(syn.radius))
-  bg = jnp.asarray(data.background, jnp.float32)
-  settings = RenderSettings(max_intersections=1 << 12)
-  images, alphas, depths = [], [], []
-  for i in range(len(cameras)):
-    out, settings = render_with_budget(render, settings, truth, cameras[i], background=bg)
-    images.append(np.clip(np.asarray(out.rgb), 0.0, 1.0))
-    alphas.append(np.asarray(out.alpha))
-    depths.append(np.asarray(out.expected_depth()))
-  r = float(syn.radius) + 0.2
-  names = tuple(f"synthetic-arc-{i}" for i in range(len(cameras)))
-  return (Views(np.stack(images).astype(np.float32), cameras, np.stack(alphas),
-                np.stack(depths), names), (np.full(3, -r), np.full(3, r)))
+  spec = data_spec(data).replace(scene=scene_name)
+  return capture_views(spec, arc_cameras(data.arc, data.width, data.height))

@@ -16,6 +16,7 @@ a JSON record and the maps as .npz for the figures), so a killed run resumes wit
 finished models.
 """
 
+import dataclasses
 import os
 import tempfile
 import time
@@ -25,14 +26,13 @@ import jax.numpy as jnp
 import numpy as np
 
 from mfsample import interrupts, metrics
-from mfsample import uncertainty as unc
 from mfsample.baselines import activenerf, fisher
 from mfsample.mean_render import render_mean
-from mfsample.model import STOCHASTIC_KINDS
 from mfsample.planning import training
 from mfsample.quality import arc as arc_lib
 from mfsample.quality import maps as maps_lib
 from mfsample.renderer.budget import render_with_budget
+from mfsample.samplers import STOCHASTIC_KINDS, sample_z
 
 POSTHOC = "posthoc"
 BASELINES = ("fisher", "activenerf", POSTHOC)
@@ -42,7 +42,7 @@ POSTHOC_MAPS = ("posthoc_colour", "posthoc_depth")
 
 
 def parse_sampler(flag):
-  """"kind" or "kind:k" -> (kind, k or None), kind one of `mfsample.model.STOCHASTIC_KINDS`."""
+  """"kind" or "kind:k" -> (kind, k or None), kind one of `mfsample.samplers.STOCHASTIC_KINDS`."""
   kind, _, rank = str(flag).partition(":")
   if kind not in STOCHASTIC_KINDS:
     raise ValueError(f"sampler {flag!r}: the kind must be one of {', '.join(STOCHASTIC_KINDS)}")
@@ -59,18 +59,17 @@ def model_names(config):
   return names
 
 
-def model_config(train_config, name):
-  """The training config of model `name` (a sampler flag or "deterministic"), a copy."""
-  cfg = train_config.copy_and_resolve_references()
-  with cfg.unlocked():
-    if name == DETERMINISTIC:
-      cfg.sampler.kind = DETERMINISTIC
-    else:
-      kind, rank = parse_sampler(name)
-      cfg.sampler.kind = kind
-      if rank is not None:
-        cfg.sampler.rank = rank
-  return cfg
+def model_recipe(train_config, name, prefix="config.train"):
+  """The `Recipe` of model `name` (a sampler flag or "deterministic") of the models'
+  training config: its sampler's kind (and rank) replaced."""
+  from mfsample.train.config import recipe
+
+  base = recipe(train_config, prefix=prefix)
+  if name == DETERMINISTIC:
+    return base._replace(spec=dataclasses.replace(base.spec, kind=DETERMINISTIC))
+  kind, rank = parse_sampler(name)
+  return base._replace(spec=dataclasses.replace(base.spec, kind=kind,
+                                                rank=base.spec.rank if rank is None else rank))
 
 
 def unit_name(scene, seed, name):
@@ -93,27 +92,30 @@ def fit_posthoc(config, model, train_views, seed, settings=None):
   """B_hat fitted to a trained deterministic `model` with its mean frozen (post-hoc U).
 
   The user's path for a pretrained model: the model is written as a 3DGS .ply
-  (`data.ply.export_ply`) and `mfsample.train.posthoc.fit_spread` fits the B_hat of
-  `ause.posthoc_sampler` to it for `ause.posthoc_steps` steps on its training views, with
-  the models' training config otherwise (loss, B_hat learning rates and bounds; lambda as
-  `posthoc.posthoc_config` chooses).
+  (`data.ply.export_ply`), read back as the mean of a stochastic field of
+  `ause.posthoc_sampler`, and `mfsample.train.posthoc.run_b_hat_fit` fits its B_hat for
+  `ause.posthoc_steps` steps on its training views, with the models' training settings
+  otherwise (loss, B_hat learning rates and bounds; lambda as `posthoc.posthoc_settings`
+  chooses).
 
   Returns:
     `mfsample.train.TrainResult` (`state.model`: the field, its mean `model`'s live
     Gaussians bit for bit; `train_seconds`: the fit's wall-clock, compilation included).
   """
-  from mfsample.data.ply import export_ply
-  from mfsample.train.posthoc import fit_spread
+  from mfsample.data.ply import export_ply, load_ply, sh_degree_of
+  from mfsample.train.posthoc import run_b_hat_fit
 
-  cfg = model_config(config.train, config.ause.posthoc_sampler)
-  with cfg.unlocked():
-    cfg.seed = int(seed)
-    cfg.train.num_steps = int(config.ause.posthoc_steps)
-    cfg.train.progress = False
+  plan = model_recipe(config.train, config.ause.posthoc_sampler)
   with tempfile.TemporaryDirectory(prefix="posthoc_") as tmp:
     path = os.path.join(tmp, "point_cloud.ply")
     export_ply(path, model)
-    return fit_spread(cfg, train_views, path, settings=settings)
+    plan = plan._replace(init=plan.init.replace(init_from="ply", ply_path=path,
+                                                sh_degree=sh_degree_of(load_ply(path))))
+    start = plan.initial_model(seed=int(seed), bounds=(np.zeros(3), np.ones(3)))
+  return run_b_hat_fit(start, train_views,
+                       plan.with_render(settings).settings.replace(
+                           num_steps=int(config.ause.posthoc_steps)),
+                       seed=int(seed), extent=plan.extent)
 
 
 def same_mean(model, fitted):
@@ -182,7 +184,7 @@ def _sample_maps(config, model, settings, test_views, prefix=""):
   """Ours' colour and depth maps of a stochastic field at the test views, under the keys
   `prefix + "colour"` and `prefix + "depth"`, and the render settings that sufficed."""
   bg = jnp.asarray(config.data.background, jnp.float32)
-  z = unc.uncertainty_z(model, int(config.ause.samples), int(config.ause.z_seed))
+  z = sample_z(model, int(config.ause.samples), seed=int(config.ause.z_seed))
   out = {prefix + "colour": [], prefix + "depth": []}
   for i in range(len(test_views)):
     res, settings = render_with_budget(maps_lib.sample_maps, settings, model,
@@ -277,7 +279,7 @@ def run_ause(config, wd, bar=None):
           if bar is not None:
             bar.set_postfix_str(f"{scene}, seed {seed}, {name}")
           t0 = time.perf_counter()
-          trained = training.train_on_views(model_config(config.train, name), train_views,
+          trained = training.train_on_views(model_recipe(config.train, name), train_views,
                                             seed=int(seed), bounds=bounds,
                                             pad_to=len(train_views))
           record, arrays = ause_of_model(config, name, trained, train_views, test_views,

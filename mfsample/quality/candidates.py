@@ -25,9 +25,10 @@ import time
 import numpy as np
 
 from mfsample import interrupts
-from mfsample import uncertainty as unc
+from mfsample.config_blocks import data_spec
+from mfsample.jobs import Budgets
 from mfsample.quality.benchmark import parse_sampler
-from mfsample.renderer.budget import Budgets
+from mfsample.samplers import sample_z
 
 # What a row varies; `paired` pairs each with its first value, the others held equal.
 SETTINGS = ("round_steps", "sampler", "samples")
@@ -40,7 +41,7 @@ def farthest_views(pool, planning, seed, num_views):
   cfg = planning.copy_and_resolve_references()
   with cfg.unlocked():
     cfg.max_views = int(num_views)
-  selected, _ = runner.plan_views(strategies.make_strategy("farthest", cfg), pool, cfg, seed,
+  selected, _ = runner.plan_views(strategies.make_strategy("farthest"), pool, cfg, seed,
                                   runner.Trainer(cfg, pool))
   return selected
 
@@ -66,7 +67,7 @@ def run_candidates(config, wd, bar=None):
   planning = c.planning.copy_and_resolve_references()
   with planning.unlocked():
     planning.data.progress = bool(config.progress) and bool(planning.data.progress)
-  pool = make_pool(planning.data)
+  pool = make_pool(data_spec(planning.data))
   counts = [int(v) for v in c.views]
   seeds = [int(s) for s in c.seeds]
   samples = [int(m) for m in c.samples]
@@ -94,21 +95,22 @@ def run_candidates(config, wd, bar=None):
           trajectories[seed] = farthest_views(pool, planning, seed, max(counts))
         selected = trajectories[seed][:n]
         t0 = time.perf_counter()
-        model = trainer.round_model(kind, selected, seed)
+        model, budgets = trainer.round_model(kind, selected, seed, budgets)
         train_seconds = time.perf_counter() - t0
         by_samples = {}
         used = [v.index for v in selected]
         unused = np.setdiff1d(np.arange(len(pool.candidates)), used)
         for m in samples:
-          z = unc.uncertainty_z(model, m, int(cfg.strategy.ours.z_seed))
+          z = sample_z(model, m, seed=int(cfg.strategy.ours.z_seed))
           res = u_against_error(model, pool.candidates.cameras[unused], z,
                                 background=pool.background,
                                 images=np.asarray(pool.candidates.images)[unused],
                                 train_cameras=pool.candidates.cameras[np.asarray(used)],
                                 center=pool.sphere.center,
                                 score_downscale=int(cfg.strategy.ours.score_downscale),
-                                budgets=budgets)
-          budgets = res.budgets
+                                score_settings=budgets.get("score"),
+                                mean_settings=budgets.get("mean"))
+          budgets = budgets.replace(score=res.score_settings, mean=res.mean_settings)
           by_samples[str(m)] = {"rho_u_error": res.rho_u_error,
                                 "rho_u_angle": res.rho_u_angle,
                                 "rho_error_angle": res.rho_error_angle}

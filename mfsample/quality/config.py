@@ -18,14 +18,16 @@ import math
 
 import ml_collections
 
+from mfsample import config_blocks as blocks
 from mfsample import config_checks as cc
 from mfsample.baselines.fisher import DEFAULT_GROUPS as FISHER_GROUPS
 from mfsample.data import FILE_KINDS
+from mfsample.data.datasets import kinds_offering
 from mfsample.planning import config as planning_variants
 from mfsample.planning.config import default_config as planning_config
-from mfsample.quality.arc import ARC_KINDS
 from mfsample.quality.benchmark import BASELINES, parse_sampler
 from mfsample.train.config import default_config as training_config
+from mfsample.train.config import validate as validate_training
 
 
 def _training():
@@ -70,7 +72,7 @@ def default_config():
   # (`baselines.fisher.fisher_pixel_variance`) and ActiveNeRF's rendered variance
   # (`baselines.activenerf.rendered_variance`). () trains no deterministic model.
   # "posthoc" (not by default): U of the same deterministic model after the fact, B_hat
-  # fitted with its mean frozen (`mfsample.train.posthoc.fit_spread`), as for a pretrained
+  # fitted with its mean frozen (`mfsample.train.posthoc.fit_b_hat`), as for a pretrained
   # 3DGS model; its colour U and depth variance are scored as Ours'.
   a.baselines = ("fisher", "activenerf")
   a.posthoc_sampler = "lowrank:2"  # The fitted field's sampler, "kind" or "kind:k".
@@ -81,14 +83,12 @@ def default_config():
   a.z_seed = 6174  # Sobol scrambling seed of the low-rank samples (authors' code: 6174).
 
   # ----------------------------------------------------------------- data
-  config.data = data = ml_collections.ConfigDict()
-  data.kind = "scene"  # "scene" (Mitsuba captures, exact depth) or "synthetic" (tests).
-  data.width = 64  # Image width in pixels.
-  data.height = 64  # Image height in pixels.
-  data.spp = 36  # Mitsuba samples per pixel (mfsample.scenes.DEFAULT_SPP).
-  data.cache_dir = ""  # Capture cache ("": $MFSAMPLE_CACHE or ~/.cache/mfsample/captures).
-  data.background = (1.0, 1.0, 1.0)  # Behind the scene, in the images and the models.
-  data.progress = True  # Progress bars of the captures.
+  # A data kind with exact depth and coverage at any camera (mfsample.data.DATA_KINDS):
+  # "scene" (Mitsuba captures) or "synthetic" (an opaque shell rendered by mfsample: tests),
+  # at 64 x 64; ause.scenes names the built-in scenes (data.scene is replaced by each).
+  config.data = data = blocks.data_block(
+      width=64, height=64, spp=36,
+      **{"synthetic.shape": "shell", "synthetic.num_gaussians": 150, "synthetic.radius": 0.5})
   # The forward-facing arc: num_views cameras at one height, looking at `target`, spread
   # evenly over `span_deg` of azimuth around `azimuth_deg`. Views 0, 2, ... (the 1st, 3rd,
   # ..., as in the light-field protocol) train the models; the views between them test.
@@ -100,11 +100,6 @@ def default_config():
   arc.distance = 2.2  # From `target`: the table fills the frame.
   arc.target = (0.0, 0.0, -0.2)  # The centre of the table top (the scenes' TABLE = -0.3).
   arc.fov_deg = 40.0  # Horizontal field of view.
-  # data.kind "synthetic": random ground-truth Gaussians rendered by mfsample (no Mitsuba).
-  data.synthetic = syn = ml_collections.ConfigDict()
-  syn.num_gaussians = 150  # Ground-truth Gaussians.
-  syn.seed = 0  # Their seed.
-  syn.radius = 0.5  # Radius of their shell.
 
   # Where the depth error counts: pixels fully covered in the ground truth (every path
   # sample hit the scene: true alpha 1, up to float rounding) and by the model (alpha > 0.5).
@@ -152,7 +147,11 @@ def validate(config):
     raise cc.ConfigError("config.ause.enabled and config.candidates.enabled are both "
                              "False: nothing to run")
   if a.enabled:
-    cc.check_choice(config, "data.kind", ARC_KINDS)
+    spec = blocks.data_spec(config.data)
+    if "depth" not in spec.offers:
+      raise cc.ConfigError(f"config.data.kind = {spec.kind!r} has no exact depth at new "
+                           f"cameras: must be one of "
+                           f"{', '.join(map(repr, kinds_offering('depth')))}")
     if d.kind == "scene":
       from mfsample.scenes import SCENES
       cc.check_sequence(config, "ause.scenes", item_choices=SCENES, distinct=True)
@@ -185,6 +184,7 @@ def validate(config):
     cc.check_float(config, "data.arc.fov_deg", above=0.0, below=180.0)
     cc.check_float(config, "mask.true_alpha_min", above=0.0, maximum=1.0)
     cc.check_float(config, "mask.model_alpha_min", minimum=0.0, below=1.0)
+    validate_training(config.train, prefix="config.train")
     steps = cc.check_int(config, "train.train.num_steps", minimum=1)
     if int(config.train.densify.start) < steps:
       raise cc.ConfigError(
@@ -206,11 +206,11 @@ def validate(config):
     cc.check_sequence(config, "candidates.seeds", item_minimum=0, distinct=True)
     counts = cc.check_sequence(config, "candidates.views", item_minimum=1, distinct=True)
     planning = config.candidates.planning
-    if planning.data.kind not in FILE_KINDS and max(counts) >= int(planning.data.num_candidates):
+    if planning.data.kind not in FILE_KINDS and max(counts) >= int(planning.data.num_train):
       raise cc.ConfigError(
           f"config.candidates.views = {tuple(counts)}: every count must leave unused "
-          f"candidates (< candidates.planning.data.num_candidates = "
-          f"{planning.data.num_candidates})")
+          f"candidates (< candidates.planning.data.num_train = "
+          f"{planning.data.num_train})")
 
 
 def _check_samplers(config, field, min_length, single=False):

@@ -24,7 +24,7 @@ import numpy as np
 from mfsample.baselines.activenerf import rendered_variance
 from mfsample.model import mean_gaussians
 from mfsample.renderer import RenderSettings, TileStats, render
-from mfsample.uncertainty import pixel_variance, sample_gaussians
+from mfsample.view_uncertainty import pixel_variance, sample_gaussians
 
 
 class SampleMaps(NamedTuple):

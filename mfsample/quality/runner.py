@@ -10,9 +10,9 @@ were made with another protocol is refused before anything is written, naming th
 import time
 
 from mfsample import jobs
+from mfsample.config_blocks import speed_only_fields
 from mfsample.quality import benchmark, candidates, figures, tables
 from mfsample.quality.config import validate
-from mfsample.train.config import speed_only_fields
 
 
 def run_uncertainty_quality(config, workdir):
@@ -68,5 +68,5 @@ FREE_FIELDS = (
     "candidates.samplers", "candidates.samples", "candidates.seeds", "candidates.views",
     "candidates.planning.progress", "candidates.planning.data.progress",
 ) + speed_only_fields("train") + speed_only_fields("candidates.planning.round_train")
-JOB = jobs.Job("uncertainty quality", run_uncertainty_quality, validate, FREE_FIELDS,
-               ("ause", "candidates"), report=jobs.table_report)
+JOB = jobs.Job("uncertainty quality", "uncertainty_quality", run_uncertainty_quality,
+               validate, FREE_FIELDS, ("ause", "candidates"), report=jobs.table_report)

@@ -12,6 +12,7 @@
 import numpy as np
 
 from mfsample.quality.benchmark import DETERMINISTIC, parse_sampler
+from mfsample.samplers import KINDS
 
 BASELINE_LABELS = {"fisher": "FisherRF", "activenerf": "ActiveNeRF",
                    "posthoc_colour": "Post-hoc B_hat: U (Eq. 10)",
@@ -20,13 +21,15 @@ MAP_LABELS = {"colour": "U (Eq. 10)", "depth": "depth variance"}
 
 
 def model_label(name):
-  """"lowrank:2" -> "Ours, rank 2", "diagonal" -> "Diagonal", "block:2" -> "Block, rank 2"."""
+  """"lowrank:2" -> "Ours, rank 2", "diagonal" -> "Diagonal", "block:2" -> "Block, rank 2"
+  (the kind's label, and its rank where its B_hat has a rank axis)."""
   if name == DETERMINISTIC:
-    return "Deterministic"
+    return KINDS[DETERMINISTIC].label
   kind, rank = parse_sampler(name)
-  if kind == "lowrank":
-    return f"Ours, rank {rank if rank is not None else '(config)'}"
-  return kind.capitalize() + (f", rank {rank}" if rank is not None and kind == "block" else "")
+  behaviour = KINDS[kind]
+  if not behaviour.rank_axis:
+    return behaviour.label
+  return f"{behaviour.label}, rank {rank if rank is not None else '(config)'}"
 
 
 def method_label(model, method):

@@ -6,12 +6,13 @@ was needed. These helpers turn that into new settings, growing the budget to the
 of two, so a jitted caller recompiles at most log2(need / budget) times.
 """
 
-from typing import NamedTuple
+from collections.abc import Callable
 
 import numpy as np
 
 from mfsample import arg_checks
 from mfsample.renderer.settings import RenderSettings
+from mfsample.renderer.tiles import TileStats
 
 
 class BudgetExceededError(RuntimeError):
@@ -24,7 +25,8 @@ def required_budget(settings: RenderSettings, stats) -> int:
   return settings.holding_budget(1 << max(need - 1, 0).bit_length()).max_intersections
 
 
-def fit_budget(settings: RenderSettings, stats, *, allow_shrink=False) -> RenderSettings:
+def fit_budget(settings: RenderSettings, stats: TileStats, *,
+               allow_shrink: bool = False) -> RenderSettings:
   """Settings whose budget holds the render that produced `stats`.
 
   Grows to the next power of two >= the padded intersection count (never shrinks unless
@@ -38,8 +40,10 @@ def fit_budget(settings: RenderSettings, stats, *, allow_shrink=False) -> Render
   return settings.replace(max_intersections=budget)
 
 
-def render_with_budget(render_fn, settings: RenderSettings, *args, max_budget=1 << 26,
-                       stats_of=lambda out: out.stats, what="render", **kwargs):
+def render_with_budget(render_fn: Callable, settings: RenderSettings, *args,
+                       max_budget: int = 1 << 26,
+                       stats_of: Callable = lambda out: out.stats, what: str = "render",
+                       **kwargs) -> tuple[object, RenderSettings]:
   """Calls `render_fn(*args, settings=settings, **kwargs)` until nothing overflows.
 
   Args:
@@ -66,33 +70,3 @@ def render_with_budget(render_fn, settings: RenderSettings, *args, max_budget=1 
           f"{what} needs {int(np.max(np.asarray(stats.num_padded)))} intersections, "
           f"more than max_budget={max_budget}")
     settings = grown
-
-
-class Budgets(NamedTuple):
-  """The render settings that sufficed for each purpose of a job (None: not known yet).
-
-  Budgets grow on overflow and are reused, so a later render of the same kind starts from
-  a budget that holds it (no regrowth, no recompilation). The record is immutable: whoever
-  grows a budget returns a new `Budgets` (`replace`), and the caller that owns the record
-  keeps the new one; nothing is updated in place behind another function's back.
-  """
-
-  score: RenderSettings | None = None  # candidate scoring: U, FisherRF, ActiveNeRF
-  optimize: RenderSettings | None = None  # the camera ascent's renders
-  landscape: RenderSettings | None = None  # U over the landscape's grid of cameras
-  eval: RenderSettings | None = None  # test evaluation of a model's mean
-  mean: RenderSettings | None = None  # mean renders of candidates (U against the error)
-  u: RenderSettings | None = None  # U over lights and its quadratic form Q
-  ascent: RenderSettings | None = None  # the light ascent's renders
-
-  def replace(self, **settings):
-    """A copy with the settings of some purposes replaced."""
-    return self._replace(**settings)
-
-  def first(self, *purposes, default=None):
-    """The settings of the first of `purposes` that is known, else `default`."""
-    for purpose in purposes:
-      value = getattr(self, purpose)
-      if value is not None:
-        return value
-    return default

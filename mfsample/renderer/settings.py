@@ -2,7 +2,7 @@
 
 import dataclasses
 
-from mfsample import arg_checks
+from mfsample import settings_checks as sc
 
 COMPOSITORS = ("jnp", "pallas")
 SEARCHSORTED_METHODS = ("scan", "scan_unrolled", "sort", "compare_all")
@@ -37,7 +37,7 @@ class RenderSettings:
       every Gaussian at 3 sigma.
     max_intersections: budget of (tile, Gaussian) pairs, counted after padding each tile's
       list to a multiple of `chunk_size`. Exceeding it sets `stats.overflow`; see
-      `mfsample.renderer.fit_budget` to grow it. Must be a multiple of
+      `mfsample.renderer.budget.fit_budget` to grow it. Must be a multiple of
       chunk_size * chunks_per_step.
     chunk_size: Gaussians composited together in one dense block (per tile).
     chunks_per_step: chunks processed per step of the jnp compositor's loop; the backward
@@ -76,41 +76,34 @@ class RenderSettings:
   def __post_init__(self):
     # Types and finiteness first: NaN passes every comparison below unnoticed (a NaN
     # radius_sigma renders nothing), and a float size fails deep inside jit.
-    for name in ("tile_size", "max_intersections", "chunk_size", "chunks_per_step"):
-      arg_checks.check_int(f"RenderSettings.{name}", getattr(self, name))
-    for name in ("alpha_max", "alpha_min", "transmittance_min", "near_plane", "eps2d",
-                 "radius_sigma"):
-      arg_checks.check_float(f"RenderSettings.{name}", getattr(self, name))
-    if self.tile_size < 1:
-      raise ValueError(f"tile_size must be >= 1, got {self.tile_size}")
-    if not 0.0 < self.alpha_max <= 1.0:
-      raise ValueError(f"alpha_max must be in (0, 1], got {self.alpha_max}")
-    if not 0.0 <= self.alpha_min < self.alpha_max:
-      raise ValueError(f"alpha_min must be in [0, alpha_max), got {self.alpha_min}")
-    if not 0.0 < self.transmittance_min < 1.0:
-      raise ValueError(f"transmittance_min must be in (0, 1), got {self.transmittance_min}")
-    if self.radius_sigma <= 0 or self.eps2d < 0 or self.near_plane <= 0:
-      raise ValueError("radius_sigma and near_plane must be > 0 and eps2d >= 0")
-    if self.chunk_size < 1 or self.chunks_per_step < 1:
-      raise ValueError("chunk_size and chunks_per_step must be >= 1")
+    for name in ("tile_size", "chunk_size", "chunks_per_step"):
+      sc.check_int(f"RenderSettings.{name}", getattr(self, name), minimum=1)
+    sc.check_float("RenderSettings.alpha_max", self.alpha_max, above=0.0, maximum=1.0)
+    sc.check_float("RenderSettings.alpha_min", self.alpha_min, minimum=0.0,
+                   below=self.alpha_max)
+    sc.check_float("RenderSettings.transmittance_min", self.transmittance_min, above=0.0,
+                   below=1.0)
+    sc.check_float("RenderSettings.near_plane", self.near_plane, above=0.0)
+    sc.check_float("RenderSettings.eps2d", self.eps2d, minimum=0.0)
+    sc.check_float("RenderSettings.radius_sigma", self.radius_sigma, above=0.0)
     step = self.chunk_size * self.chunks_per_step
-    if self.max_intersections < step or self.max_intersections % step:
-      raise ValueError(
-          f"max_intersections ({self.max_intersections}) must be a positive multiple of "
-          f"chunk_size * chunks_per_step ({step}).")
-    if self.compositor not in COMPOSITORS:
-      raise ValueError(f"compositor must be one of {COMPOSITORS}, got {self.compositor!r}")
+    budget = sc.check_int("RenderSettings.max_intersections", self.max_intersections,
+                          minimum=1)
+    if budget < step or budget % step:
+      raise sc.SettingsError("RenderSettings.max_intersections", budget,
+                             f"a positive multiple of chunk_size * chunks_per_step ({step})")
+    sc.check_choice("RenderSettings.compositor", self.compositor, COMPOSITORS)
     if self.compositor == "pallas" and not (_is_power_of_two(self.tile_size)
                                             and _is_power_of_two(self.chunk_size)):
       # The kernel works on [tile_size^2, chunk_size] blocks; GPU kernel languages (Triton)
       # need block sides that are powers of two.
-      raise ValueError("the pallas compositor needs tile_size and chunk_size to be powers "
-                       f"of two, got {self.tile_size} and {self.chunk_size}")
-    if self.pallas_warps not in PALLAS_WARPS:
-      raise ValueError(f"pallas_warps must be one of {PALLAS_WARPS}, got {self.pallas_warps!r}")
-    if self.searchsorted_method not in SEARCHSORTED_METHODS:
-      raise ValueError(f"searchsorted_method must be one of {SEARCHSORTED_METHODS}, got "
-                       f"{self.searchsorted_method!r}")
+      raise sc.SettingsError("RenderSettings.tile_size", (self.tile_size, self.chunk_size),
+                             "powers of two (tile_size and chunk_size) for the pallas "
+                             "compositor")
+    sc.check_choice("RenderSettings.pallas_warps", self.pallas_warps, PALLAS_WARPS)
+    sc.check_choice("RenderSettings.searchsorted_method", self.searchsorted_method,
+                    SEARCHSORTED_METHODS)
+    sc.check_bool("RenderSettings.skip_unused_steps", self.skip_unused_steps)
 
   @property
   def max_chunks(self):

@@ -19,11 +19,6 @@ _C3 = (-0.5900435899266435, 2.890611442640554, -0.4570457994644658, 0.3731763325
        -0.4570457994644658, 1.445305721320277, -0.5900435899266435)
 
 
-def num_coefficients(degree):
-  """(degree + 1)^2."""
-  return (degree + 1) ** 2
-
-
 def sh_basis(dirs, degree):
   """Evaluates the real SH basis.
 

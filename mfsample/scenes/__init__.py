@@ -8,6 +8,7 @@ from mfsample.scenes.cache import default_cache_dir
 from mfsample.scenes.capture import (
     DEFAULT_SH_SPP,
     DEFAULT_SPP,
+    Oracle,
     capture,
     capture_sh_basis,
     capture_views,
@@ -25,6 +26,7 @@ __all__ = [
     "SCENES",
     "Lighting",
     "Material",
+    "Oracle",
     "Scene",
     "Shape",
     "capture",

@@ -10,6 +10,7 @@ Every capture goes through the on-disk cache (`mfsample.scenes.cache`): capturin
 scene, camera, resolution, spp and variant again only reads a file.
 """
 
+import dataclasses
 import math
 
 import numpy as np
@@ -57,6 +58,21 @@ def capture(scene, camera, *, spp=DEFAULT_SPP, cache_dir=None, background=(1.0, 
   (entry, _), = _capture_entries(scene, [camera], spp=spp, cache_dir=cache_dir,
                                  variant=variant, cache=cache, progress=False)
   return _composite(entry, background) + (entry["depth"],)
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Oracle:
+  """A scene's ground truth at any camera: `oracle(camera)` -> [H, W, 3] image (`capture`'s
+  colour, cached on disk), for the strategies that propose new poses."""
+
+  scene: object
+  spp: int = DEFAULT_SPP
+  cache_dir: str | None = None
+  background: tuple = (1.0, 1.0, 1.0)
+
+  def __call__(self, camera):
+    return capture(self.scene, camera, spp=self.spp, cache_dir=self.cache_dir,
+                   background=self.background)[0]
 
 
 def capture_views(scene, cameras, *, spp=DEFAULT_SPP, cache_dir=None, progress=True,

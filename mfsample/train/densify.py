@@ -22,7 +22,7 @@ from mfsample.model import (
     Model,
     Params,
     capacity_bucket,
-    init_spread,
+    init_b_hat,
     model_group_shapes,
     padding_values,
 )
@@ -66,7 +66,7 @@ def densify_and_prune(state: TrainState, *, rng, grad_threshold, percent_dense, 
       ones split (0.01).
     extent: scene extent.
     min_opacity: prune opacity below this (3DGS 0.005; authors 0.01).
-    init_scales: {group: float} for fresh B_hat entries (`model.init_spread`).
+    init_scales: {group: float} for fresh B_hat entries (`model.init_b_hat`).
     max_gaussians: live Gaussians never exceed this; when the candidates would, the ones
       with the largest gradients are densified first.
     prune_big: also prune Gaussians larger than `max_world_size` x extent and, if
@@ -78,7 +78,7 @@ def densify_and_prune(state: TrainState, *, rng, grad_threshold, percent_dense, 
   """
   model = state.model
   mean = _host(model.params.mean)
-  spread = _host(model.params.spread)
+  b_hat = _host(model.params.b_hat)
   signs = _host(model.signs)
   mask = np.asarray(model.mask)
   stats = _host(state.stats)
@@ -135,13 +135,13 @@ def densify_and_prune(state: TrainState, *, rng, grad_threshold, percent_dense, 
   pad_mean = padding_values(shapes, new_capacity)
   mean_out = {g: _assemble(mean[g], keep, new_mean[g], new_capacity, pad_mean[g])
               for g in mean}
-  fresh_spread, fresh_signs = init_spread(rng, num_new, shapes, model.spec, init_scales)
+  fresh_b_hat, fresh_signs = init_b_hat(rng, num_new, shapes, model.spec, init_scales)
 
   def zeros_like_rows(x):
     return np.zeros((new_capacity,) + x.shape[1:], x.dtype)
 
-  spread_out = {g: _assemble(spread[g], keep, fresh_spread[g].astype(spread[g].dtype),
-                             new_capacity, zeros_like_rows(spread[g])) for g in spread}
+  b_hat_out = {g: _assemble(b_hat[g], keep, fresh_b_hat[g].astype(b_hat[g].dtype),
+                            new_capacity, zeros_like_rows(b_hat[g])) for g in b_hat}
   signs_out = {g: _assemble(signs[g], keep, fresh_signs[g].astype(signs[g].dtype),
                             new_capacity, zeros_like_rows(signs[g])) for g in signs}
 
@@ -154,7 +154,7 @@ def densify_and_prune(state: TrainState, *, rng, grad_threshold, percent_dense, 
 
   new_model = Model(
       params=Params(mean=jax.tree.map(jnp.asarray, mean_out),
-                    spread=jax.tree.map(jnp.asarray, spread_out)),
+                    b_hat=jax.tree.map(jnp.asarray, b_hat_out)),
       signs=jax.tree.map(jnp.asarray, signs_out),
       mask=jnp.asarray(np.arange(new_capacity) < live),
       sh_degree=model.sh_degree,
@@ -221,7 +221,7 @@ def _pad_state(state, capacity):
     return jnp.concatenate([x, jnp.zeros((extra,) + x.shape[1:], x.dtype)])
 
   new_model = model.replace(
-      params=Params(mean=mean, spread=jax.tree.map(pad, model.params.spread)),
+      params=Params(mean=mean, b_hat=jax.tree.map(pad, model.params.b_hat)),
       signs=jax.tree.map(pad, model.signs),
       mask=jnp.concatenate([model.mask, jnp.zeros((extra,), bool)]))
   return state._replace(model=new_model, opt_state=map_moments(state.opt_state,

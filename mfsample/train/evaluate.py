@@ -13,7 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from mfsample import metrics
-from mfsample import uncertainty as uncertainty_lib
+from mfsample import view_uncertainty as uncertainty_lib
 from mfsample._json import atomic_path
 from mfsample.mean_render import render_mean, render_mean_views
 from mfsample.renderer.budget import render_with_budget

@@ -9,13 +9,11 @@ import json
 import os
 import time
 
-import jax
-
-from mfsample import jobs
+from mfsample import config_blocks, jobs
 from mfsample.data import datasets as data_lib
-from mfsample.samplers import sobol_z
-from mfsample.train.config import validate
-from mfsample.train.loop import RESUME_FREE_FIELDS, train
+from mfsample.samplers import sample_z
+from mfsample.train.config import recipe, train_spec, validate
+from mfsample.train.loop import run_training
 
 
 def train_and_evaluate(config, workdir):
@@ -36,10 +34,20 @@ def train_and_evaluate(config, workdir):
   from mfsample.train import evaluate as eval_lib
 
   with jobs.open_workdir(JOB, config, workdir) as wd:
-    dataset = data_lib.load_dataset(config.data)
+    dataset = data_lib.load_dataset(config_blocks.data_spec(config.data))
     wd.write_config()
-    result = train(config, dataset.train, bounds=dataset.bounds,
-                   checkpoint_dir=wd.file("checkpoints"), points=dataset.points)
+    settings, _ = train_spec(config)
+    extent = settings.extent
+    if extent is None:  # 3DGS's, from the training cameras
+      extent = data_lib.scene_extent(dataset.train.cameras)
+    plan = recipe(config, extent=extent)
+    model = plan.initial_model(seed=int(config.seed), bounds=dataset.bounds,
+                               points=dataset.points)
+    result = run_training(model, dataset.train, settings, seed=int(config.seed), extent=extent,
+                          checkpoint_dir=wd.file("checkpoints"),
+                          checkpoint_every=config.train.checkpoint_every,
+                          keep_checkpoints=config.train.keep_checkpoints,
+                          progress=config.train.progress, record={"job": JOB.name})
     state, setup = result.state, result.setup
     wd.write_json("train_log.json", result.history, indent=2)
 
@@ -47,12 +55,9 @@ def train_and_evaluate(config, workdir):
     model = state.model
     z = None
     if model.spec.stochastic and config.eval.uncertainty_samples > 0:
-      from mfsample import samplers
-      m = int(config.eval.uncertainty_samples)
-      key = jax.random.PRNGKey(setup.seed + 3)
-      rows = sobol_z(m, model.spec.rank, int(config.sampler.z_seed) + 1) \
-          if model.spec.kind == "lowrank" else None
-      z = samplers.draw_z(model, m, key, rows)
+      # Scrambled Sobol with the training's seed + 1 (not the training's own points).
+      z = sample_z(model, int(config.eval.uncertainty_samples),
+                   seed=int(config.sampler.z_seed) + 1)
     t0 = time.perf_counter()
     ev = eval_lib.evaluate(model, dataset.test, background=dataset.background,
                            settings=setup.step_config.settings, lpips_fn=lpips_fn,
@@ -65,6 +70,7 @@ def train_and_evaluate(config, workdir):
     summary = dict(ev.metrics)
     summary.update({
         "sampler": model.spec.kind, "rank": model.spec.rank,
+        "sampler_spec": model.spec.to_dict(),
         "steps": int(state.step), "live_gaussians": model.num_live,
         "train_seconds": result.train_seconds, "eval_seconds": eval_seconds,
         "resolution": [int(dataset.train.images.shape[2]),
@@ -85,6 +91,10 @@ def report(state, workdir):
           f"written to {workdir}")
 
 
-JOB = jobs.Job("training", train_and_evaluate, validate, RESUME_FREE_FIELDS,
+# Fields a resumed run may change: the speed-only ones, the progress bar, and which
+# checkpoints are written and kept (a restored state is bit-identical whichever it is).
+FREE_FIELDS = config_blocks.speed_only_fields() + ("train.progress", "train.checkpoint_every",
+                                                   "train.keep_checkpoints")
+JOB = jobs.Job("training", "training", train_and_evaluate, validate, FREE_FIELDS,
                ("checkpoints", "metrics.json", "train_log.json"), report=report,
                progress_field="train.progress")

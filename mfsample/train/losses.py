@@ -10,7 +10,7 @@ Sec. 4.3) applied only every `volume_every`-th step.
 import jax.numpy as jnp
 
 from mfsample import metrics
-from mfsample.model import spread_magnitude
+from mfsample.samplers import b_hat_magnitude
 
 
 def l1(pred, target):
@@ -41,7 +41,7 @@ def volume(model):
   nor explodes for large ones (paper Sec. 4.3).
   """
   total = jnp.zeros((), model.params.mean["means"].dtype)
-  for b in spread_magnitude(model.params.spread).values():  # |relu(raw) * sign| = relu(raw)
+  for b in b_hat_magnitude(model.params.b_hat).values():  # |relu(raw) * sign| = relu(raw)
     live = model.mask.reshape((-1,) + (1,) * (b.ndim - 1))
     total = total + jnp.sum(jnp.where(live, b, 0.0))
   return total

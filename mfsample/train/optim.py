@@ -21,7 +21,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from mfsample.model import GROUPS
+from mfsample.train.settings import OptimSettings
 
 
 def exponential_lr(init, final, max_steps):
@@ -46,18 +46,18 @@ class LearningRates:
     position: (init, final, max_steps) of the exponential decay of the mean's centres
       (already multiplied by the scene extent).
     mean: ((group, lr), ...) for the other mean groups.
-    spread: ((group, lr), ...) for B_hat entries (the centres' already times extent).
+    b_hat: ((group, lr), ...) for B_hat's raw entries (the centres' already times extent).
   """
 
   position: tuple = (1.6e-4, 1.6e-6, 30_000)
   mean: tuple = ()
-  spread: tuple = ()
+  b_hat: tuple = ()
 
   def rate(self, kind, group):
     """A float or a schedule `count -> lr` for the leaf `params.<kind>[group]`."""
     if kind == "mean" and group == "means":
       return exponential_lr(*self.position)
-    table = dict(self.mean if kind == "mean" else self.spread)
+    table = dict(self.mean if kind == "mean" else self.b_hat)
     if group not in table:
       raise KeyError(f"no learning rate for {kind} group {group!r}")
     return table[group]
@@ -94,30 +94,33 @@ def scale_by_group_lr(rates: LearningRates) -> optax.GradientTransformation:
 
 
 def _kind_and_group(path):
-  """("mean" | "spread", group) of a leaf path in a `Params` tree."""
+  """("mean" | "b_hat", group) of a leaf path in a `Params` tree."""
   names = [getattr(k, "name", None) or getattr(k, "key", None) for k in path]
-  if len(names) < 2 or names[0] not in ("mean", "spread"):
+  if len(names) < 2 or names[0] not in ("mean", "b_hat"):
     raise ValueError(f"not a Params leaf: {jax.tree_util.keystr(path)}")
   return names[0], names[1]
 
 
-def learning_rates(lr_mean, lr_spread, extent, max_steps):
-  """`LearningRates` from config blocks.
+def learning_rates(optim: OptimSettings, extent, max_steps, groups) -> LearningRates:
+  """`LearningRates` of a model with parameter `groups`, in world units.
 
   Args:
-    lr_mean: mapping with "position_lr_init", "position_lr_final" (both x extent) and
-      one lr per other mean group.
-    lr_spread: mapping group -> lr for B_hat entries; "means" is multiplied by extent.
-    extent: scene extent (world units).
-    max_steps: steps of the position decay.
+    optim: `OptimSettings`.
+    extent: scene extent (world units): the centres' rates (mean and B_hat) scale with it.
+    max_steps: steps of the centres' decay.
+    groups: the model's groups (each must have a rate in `optim`).
   """
-  groups = [g for g in GROUPS if g != "means"]
+  mean, b_hat = dict(optim.mean_lr), dict(optim.b_hat_lr)
+  missing = [g for g in groups if g != "means" and g not in mean]
+  if missing:
+    raise ValueError(f"OptimSettings.mean_lr has no learning rate for the model's groups "
+                     f"{missing}")
   return LearningRates(
-      position=(float(lr_mean["position_lr_init"]) * extent,
-                float(lr_mean["position_lr_final"]) * extent, int(max_steps)),
-      mean=tuple((g, float(lr_mean[g])) for g in groups if g in lr_mean),
-      spread=tuple((g, float(lr_spread[g]) * (extent if g == "means" else 1.0))
-                   for g in GROUPS if g in lr_spread),
+      position=(float(optim.position_lr_init) * extent,
+                float(optim.position_lr_final) * extent, int(max_steps)),
+      mean=tuple((g, mean[g]) for g in groups if g != "means"),
+      b_hat=tuple((g, b_hat[g] * (extent if g == "means" else 1.0)) for g in groups
+                  if g in b_hat),
   )
 
 

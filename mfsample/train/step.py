@@ -1,7 +1,7 @@
 """The training state and the jitted training step (static shapes, no host logic).
 
-One step: draw z, render M samples theta(z) of the model into one training target, take the
-gradient of the Eq. 9 loss w.r.t. the mean and B_hat, apply Adam with per-group learning
+One step: draw z, render M samples theta(z) of the model into each of its training targets,
+take the gradient of the Eq. 9 loss w.r.t. the mean and B_hat, apply Adam with per-group learning
 rates, clamp B_hat into its bounds, and accumulate the densification statistics. If any
 render overflowed its intersection budget the step returns the *unchanged* state and
 raises `overflow`: the host grows the budget and re-runs the step, so training never
@@ -12,8 +12,8 @@ camera (and light) a step trains on, how a sample of the model is rendered there
 per-step schedule of the model (3DGS's rising SH degree). `ColourField` is the 3DGS colour
 field (SH colour per Gaussian); the relightable field of `mfsample.lighting` is the other.
 
-Data-parallel training: with `StepConfig.batch_size` B > 1 a step trains on a batch of B
-targets (views, or (light, view) pairs), split over `StepConfig.num_devices` devices
+Every step trains on a batch of B = `StepConfig.batch_size` >= 1 targets (views, or
+(light, view) pairs), split over `StepConfig.num_devices` devices
 (`mfsample.sharding.reduce_sharded`), each with its own z. Precisely, the B targets at the
 positions p = tB .. tB + B - 1 of the target order (a B = 1 run's steps tB .. tB + B - 1,
 each with that step's z: Sobol rows p M .. p M + M - 1, or the key fold_in(key, p)) are all
@@ -32,7 +32,8 @@ radii are exact; the gradient norms are summed in another order than B consecuti
 would (float rounding). A step overflows if any target's render does. Schedules (learning
 rates, densification, the volume term, `stochastic_until`, the SH degree) count steps, so a
 run of `num_steps` steps sees B times as many targets as with B = 1. B = 1 is the plain
-single-target step, bit for bit.
+single-target step, with no code path of its own: `sharding.reduce_sharded` calls a batch of
+one element directly.
 """
 
 import dataclasses
@@ -45,9 +46,10 @@ import jax.numpy as jnp
 import optax
 
 from mfsample import samplers, sharding
-from mfsample.model import Model, project_spread
+from mfsample.model import Model, sample
 from mfsample.renderer.render import render
 from mfsample.renderer.settings import RenderSettings
+from mfsample.samplers import clamp_b_hat
 from mfsample.train import losses, optim
 
 
@@ -80,8 +82,8 @@ class TrainState(NamedTuple):
     model: `Model` (mean, B_hat, signs, mask, active SH degree).
     opt_state: state of `optim.make_optimizer`.
     stats: `DensifyStats`.
-    key: [2] uint32 PRNG key; the key of step t is fold_in(key, t), so a resumed run draws
-      the same numbers.
+    key: [2] uint32 PRNG key; the key of the target at position p of the target order is
+      fold_in(key, p), so a resumed run draws the same numbers.
   """
 
   step: chex.Array
@@ -94,21 +96,21 @@ class TrainState(NamedTuple):
 class StepMetrics(NamedTuple):
   """Scalars a step reports (host reads them every step, cheaply)."""
 
-  loss: chex.Array  # total loss (Eq. 9)
-  data_loss: chex.Array  # photometric term, mean over samples
+  loss: chex.Array  # total loss (Eq. 9): the batch's mean data term less the volume term
+  data_loss: chex.Array  # photometric term, mean over the targets and their samples
   volume: chex.Array  # ||B_hat||_1 over live Gaussians
   overflow: chex.Array  # bool: a render exceeded the budget; the state was not updated
-  num_padded: chex.Array  # int32: largest padded intersection count over the samples
+  num_padded: chex.Array  # int32: largest padded intersection count over the renders
 
 
 @dataclasses.dataclass(frozen=True)
 class StepConfig:
-  """Static (hashable) settings of the step.
+  """Static (hashable) settings of the step, resolved for one run (`loop.make_setup`).
 
   Attributes:
     settings: `RenderSettings` (its budget is grown by the host on overflow).
     background: RGB tuple behind the Gaussians.
-    num_samples: M, samples rendered per step (paper: 1).
+    num_samples: M, samples rendered per target (paper: 1).
     ssim_weight: w of the D-SSIM term (3DGS: 0.2).
     volume_weight: lambda of Eq. 9.
     volume_every: the volume term is applied on every `volume_every`-th step only.
@@ -119,13 +121,13 @@ class StepConfig:
     stochastic_until: from this step on the step renders the mean (z = 0), while the
       volume term goes on as configured. The paper samples at every step (the default,
       never); the authors' code stops after the first opacity reset (step 3000).
-    rates: `optim.LearningRates` of the per-group Adam.
+    rates: `optim.LearningRates` of the per-group Adam, in world units.
     train_mean: False freezes the mean: its gradient is stopped, so Adam's moments of it stay
       zero and its update is exactly zero; only B_hat is fitted (post-hoc uncertainty of a
       pretrained model, `mfsample.train.posthoc`).
     batch_size: B, targets per step (module docstring); 1: the single-target step.
-    num_devices: devices the B targets are split over (B > 1 only; the devices of every
-      process, `mfsample.sharding.mesh_devices`).
+    num_devices: devices the B targets are split over (the devices of every process,
+      `mfsample.sharding.mesh_devices`).
   """
 
   settings: RenderSettings = RenderSettings()
@@ -147,12 +149,16 @@ class StepConfig:
   def optimizer(self):
     return optim.make_optimizer(self.rates)
 
+  def with_settings(self, settings: RenderSettings):
+    """The same step with other render settings (a grown budget)."""
+    return dataclasses.replace(self, settings=settings)
+
 
 @dataclasses.dataclass(frozen=True)
 class ColourField:
   """A field with SH colour per Gaussian (3DGS): the step's `Field`.
 
-  Training data: (images [V, H, W, 3], `Camera` [V]); a step's index: the view (int32).
+  Training data: (images [V, H, W, 3], `Camera` [V]); a target: a view index (int32).
   The active SH degree rises by one every `StepConfig.sh_degree_every` steps (all bands from
   the first step when it is 0).
 
@@ -170,14 +176,14 @@ class ColourField:
     return model.replace(sh_degree=degree.astype(jnp.int32))
 
   def target(self, data, index):
-    """(image [H, W, 3], camera, extra) of the step: the view `index`."""
+    """(image [H, W, 3], camera, extra) of the target: the view `index`."""
     images, cameras = data
     return images[index], cameras[index], None
 
   def render(self, model, z, camera, extra, cfg: "StepConfig", screen_offset):
     """`RenderOutput` of the sample theta(z) of `model` seen by `camera`."""
     del extra
-    return render(samplers.sample(model, z), camera, background=cfg.background,
+    return render(sample(model, z), camera, background=cfg.background,
                   settings=cfg.settings, screen_offset=screen_offset)
 
 
@@ -197,14 +203,14 @@ def _mask_rows(tree, mask):
   return jax.tree.map(f, tree)
 
 
-def step_z(cfg, model, key, position, step, sobol_rows):
-  """z [M, k] of the target at `position` of the target order, in step `step`.
+def step_z(cfg, model, key, position, step, rows):
+  """z [M, *z_shape] of the target at `position` of the target order, in step `step`.
 
-  The target's Sobol rows (or fresh uniforms from `fold_in(key, position)`, per
-  `samplers.draw_z`), zero from `stochastic_until` on (the mean is rendered). With one
-  target per step, position = step.
+  The target's Sobol rows where the spec's z source is Sobol, else fresh uniforms from
+  `fold_in(key, position)` (`samplers.draw_z`); zero from `stochastic_until` on (the mean
+  is rendered).
   """
-  z = samplers.draw_z(model, cfg.num_samples, jax.random.fold_in(key, position), sobol_rows)
+  z = samplers.draw_z(model, cfg.num_samples, jax.random.fold_in(key, position), rows)
   return jnp.where(step < cfg.stochastic_until, z, 0.0)
 
 
@@ -213,12 +219,6 @@ def volume_weight_at(cfg, step):
   before `volume_until`, else 0."""
   volume_on = ((step + 1) % cfg.volume_every == 0) & (step < cfg.volume_until)
   return jnp.where(volume_on, cfg.volume_weight, 0.0)
-
-
-def step_schedule(cfg, model, key, step, sobol_rows):
-  """This step's samples z [M, k] (`step_z`) and the weight of Eq. 9's volume term
-  (`volume_weight_at`), for one target per step."""
-  return step_z(cfg, model, key, step, step, sobol_rows), volume_weight_at(cfg, step)
 
 
 def _trainable(params, cfg):
@@ -255,77 +255,8 @@ def _ndc_grad_norm(grad2d, camera):
   return jnp.linalg.norm(grad2d * half_size, axis=-1)
 
 
-def _finish(state, model, grads, new_stats, overflow, cfg):
-  """The new state after Adam on `grads` (padding rows frozen, B_hat clamped), or the old one
-  on overflow."""
-  updates, opt_state = cfg.optimizer.update(grads, state.opt_state, model.params)
-  updates = _mask_rows(updates, model.mask)  # padding rows never move
-  params = optax.apply_updates(model.params, updates)
-  params = params._replace(spread=project_spread(params.spread, model.spec))
-  new_model = model.replace(params=params)
-  new_state = TrainState(state.step + 1, new_model, opt_state, new_stats, state.key)
-
-  # On overflow the step is void: keep the old state. A select fuses into the elementwise
-  # updates (a lax.cond would copy the whole state); the shape check, at trace time, keeps
-  # it from silently broadcasting a malformed state.
-  chex.assert_trees_all_equal_shapes_and_dtypes(state, new_state)
-  return jax.tree.map(lambda old, new: jnp.where(overflow, old, new), state, new_state)
-
-
-def train_step(state: TrainState, data, index, sobol_rows, *, cfg: StepConfig,
-               field=COLOUR):
-  """One optimisation step (pure; `train_step_jit` is its jitted form).
-
-  Args:
-    state: `TrainState`.
-    data: the field's training data (`ColourField`: images [V, H, W, 3] and `Camera` [V]).
-    index: the step's target in `data` (`ColourField`: the view, int32); with
-      `cfg.batch_size` B > 1 the B targets, a leading [B] axis on every leaf.
-    sobol_rows: [M, k] Sobol z's of this step (low-rank sampler; ignored otherwise); with
-      B > 1, [B, M, k]: each target's rows.
-    cfg: `StepConfig` (static).
-    field: the `Field` (static): what a step trains on and how a sample is rendered.
-
-  Returns:
-    (new state, `StepMetrics`). With B > 1, `loss` and `data_loss` are the batch's (module
-    docstring) and `num_padded` the largest over its targets.
-  """
-  if cfg.batch_size > 1:
-    return _batch_step(state, data, index, sobol_rows, cfg, field)
-  step = state.step
-  model = field.prepare(state.model, step, cfg)
-  image, camera, extra = field.target(data, index)
-  z, volume_weight = step_schedule(cfg, model, state.key, step, sobol_rows)
-  offset2d = jnp.zeros((model.capacity, 2), model.params.mean["means"].dtype)
-
-  def loss_fn(params, offset2d):
-    m = model.replace(params=_trainable(params, cfg))
-    data_loss, aux = _data_term(field, m, z, image, camera, extra, cfg, offset2d)
-    volume = _volume(m, data_loss.dtype)
-    return data_loss - volume_weight * volume, (data_loss, volume, aux)
-
-  grad_fn = jax.value_and_grad(loss_fn, argnums=(0, 1), has_aux=True)
-  (loss, (data_loss, volume, (radii, visible, stats))), (grads, grad2d) = grad_fn(
-      model.params, offset2d)
-
-  # Densification statistics (3DGS): the norm of the 2D-centre gradient in NDC units.
-  grad_norm = _ndc_grad_norm(grad2d, camera)
-  seen = jnp.any(visible, axis=0) & (step < cfg.stats_until)
-  new_stats = DensifyStats(
-      grad_accum=state.stats.grad_accum + jnp.where(seen, grad_norm, 0.0),
-      count=state.stats.count + seen.astype(jnp.int32),
-      max_radii=jnp.where(seen, jnp.maximum(state.stats.max_radii, jnp.max(radii, axis=0)),
-                          state.stats.max_radii),
-  )
-  overflow = jnp.any(stats.overflow)
-  new_state = _finish(state, model, grads, new_stats, overflow, cfg)
-  metrics = StepMetrics(loss=loss, data_loss=data_loss, volume=volume, overflow=overflow,
-                        num_padded=jnp.max(stats.num_padded))
-  return new_state, metrics
-
-
 def _target_terms(target, model, data, step, cfg, field):
-  """One target's share of a batch step: (sums, maxes) for `sharding.reduce_sharded`.
+  """One target's share of a step: (sums, maxes) for `sharding.reduce_sharded`.
 
   sums: (D, dD/dparams, [C] NDC gradient norm where seen, [C] int32 seen);
   maxes: ([C] largest screen radius where seen (0 elsewhere), int32 overflow, int32 padded
@@ -373,16 +304,16 @@ class BatchGradients(NamedTuple):
   num_padded: chex.Array
 
 
-def batch_gradients(state: TrainState, data, index, sobol_rows, *, cfg: StepConfig,
+def batch_gradients(state: TrainState, data, index, rows, *, cfg: StepConfig,
                     field=COLOUR) -> BatchGradients:
-  """`BatchGradients` of the B = `cfg.batch_size` targets `index` (leaves [B]) with Sobol
-  rows [B, M, k], split over `cfg.num_devices` devices; inside jit."""
+  """`BatchGradients` of the B targets `index` (leaves [B]) with Sobol rows [B, M, k],
+  split over `cfg.num_devices` devices; inside jit."""
   step = state.step
   model = field.prepare(state.model, step, cfg)
   b = jax.tree.leaves(index)[0].shape[0]
   positions = step * b + jnp.arange(b)
-  z = jax.vmap(lambda p, rows: step_z(cfg, model, state.key, p, step, rows))(
-      positions, jnp.asarray(sobol_rows))
+  z = jax.vmap(lambda p, r: step_z(cfg, model, state.key, p, step, r))(
+      positions, jnp.asarray(rows))
   (data_sum, grad_sum, grad_norms, counts), (radii, overflow, num_padded) = (
       sharding.reduce_sharded(
           lambda target, mdl, dat: _target_terms(target, mdl, dat, step, cfg, field),
@@ -401,14 +332,44 @@ def batch_gradients(state: TrainState, data, index, sobol_rows, *, cfg: StepConf
                         overflow > 0, num_padded)
 
 
-def _batch_step(state, data, index, sobol_rows, cfg, field):
-  """`train_step` with B = `cfg.batch_size` > 1 targets (module docstring)."""
+def train_step(state: TrainState, data, index, rows, *, cfg: StepConfig, field=COLOUR):
+  """One optimisation step on a batch of B = `cfg.batch_size` targets (pure; jittable).
+
+  Renders M samples theta(z) for every target, takes the gradient of Eq. 9 (the mean of
+  the targets' data terms less the volume term), applies Adam with the per-group rates,
+  freezes padding rows, clamps B_hat into its bounds and accumulates the densification
+  statistics. If any render overflowed its budget, the step returns the *unchanged* state
+  and `overflow`: grow the budget (`loop.with_grown_budget`) and run it again.
+
+  Args:
+    state: `TrainState`.
+    data: the field's training data (`ColourField`: images [V, H, W, 3] and `Camera` [V]).
+    index: [B] the targets in `data` (`ColourField`: view indices, int32; every leaf [B]).
+    rows: [B, M, k] the targets' Sobol z rows (the spec's z source is Sobol), or [B, M, 0]
+      (uniform z from the state's key); `loop.step_targets` gives both.
+    cfg: `StepConfig` (static).
+    field: the `Field` (static): what a step trains on and how a sample is rendered.
+
+  Returns:
+    (new state, `StepMetrics`).
+  """
   model = field.prepare(state.model, state.step, cfg)
-  g = batch_gradients(state, data, index, sobol_rows, cfg=cfg, field=field)
+  g = batch_gradients(state, data, index, rows, cfg=cfg, field=field)
   new_stats = DensifyStats(grad_accum=state.stats.grad_accum + g.stats.grad_accum,
                            count=state.stats.count + g.stats.count,
                            max_radii=jnp.maximum(state.stats.max_radii, g.stats.max_radii))
-  new_state = _finish(state, model, g.grads, new_stats, g.overflow, cfg)
+  updates, opt_state = cfg.optimizer.update(g.grads, state.opt_state, model.params)
+  updates = _mask_rows(updates, model.mask)  # padding rows never move
+  params = optax.apply_updates(model.params, updates)
+  params = params._replace(b_hat=clamp_b_hat(params.b_hat, model.spec))
+  new_model = model.replace(params=params)
+  new_state = TrainState(state.step + 1, new_model, opt_state, new_stats, state.key)
+
+  # On overflow the step is void: keep the old state. A select fuses into the elementwise
+  # updates (a lax.cond would copy the whole state); the shape check, at trace time, keeps
+  # it from silently broadcasting a malformed state.
+  chex.assert_trees_all_equal_shapes_and_dtypes(state, new_state)
+  new_state = jax.tree.map(lambda old, new: jnp.where(g.overflow, old, new), state, new_state)
   metrics = StepMetrics(loss=g.loss, data_loss=g.data_loss, volume=g.volume,
                         overflow=g.overflow, num_padded=g.num_padded)
   return new_state, metrics
@@ -433,7 +394,7 @@ def clear_compiled_steps():
 
 
 def make_train_step(cfg: StepConfig, field=COLOUR, max_traces=None):
-  """`fn(state, data, index, sobol_rows) -> (state, StepMetrics)`, jitted.
+  """`fn(state, data, index, rows) -> (state, StepMetrics)`, jitted.
 
   Args:
     cfg: `StepConfig`.

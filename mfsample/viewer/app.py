@@ -105,8 +105,8 @@ class Frame:
 
 def scene_frame(step, model=None):
   """The `Frame` of a step's cameras (or of its model's Gaussians when it has none)."""
-  from mfsample.next_views.candidates import capture_up
   from mfsample.viewer.runs import Camera
+  from mfsample.your_data.candidates import capture_up
 
   groups = [g[0] for g in (step.train, step.candidates) if g is not None]
   groups += [p.camera for p in step.proposals]
@@ -163,7 +163,9 @@ class Viewer:
     self.splat_key = None
     self.frame = None
     self.cameras = {}  # camera choice label -> (group, index)
-    self.renderer = models.Renderer()
+    # The render budget that sufficed so far (it only grows: later views of the same size
+    # reuse the compiled renders).
+    self.render_settings = models.START
     self.gaussian_cache = {}
     self.lock = threading.RLock()
     self._build_panel()
@@ -321,7 +323,7 @@ class Viewer:
       num, seed = self.run.u_samples()
       cameras = downscale_camera(group[0], self.run.score_downscale())
       self.gaussian_cache = {key: gaussian_uncertainty(
-          model, cameras, models.samples(model, num, seed), settings=self.renderer.settings,
+          model, cameras, models.samples(model, num, seed), settings=self.render_settings,
           background=np.asarray(self.run.background(), np.float32))}
     return self.gaussian_cache[key]
 
@@ -478,8 +480,12 @@ class Viewer:
     num, seed = self.run.u_samples()
     z = models.samples(model, num, seed)
     if models.is_relightable(model):
-      return self.renderer.relit(model, camera, z, self.run.light_of(step))
-    return self.renderer.colour(model, camera, z, self.run.background())
+      rgb, pmap, u, self.render_settings = models.render_relit(
+          model, camera, z, self.run.light_of(step), self.render_settings)
+    else:
+      rgb, pmap, u, self.render_settings = models.render_colour(
+          model, camera, z, self.run.background(), self.render_settings)
+    return rgb, pmap, u
 
 
 # ------------------------------------------------------------------ serving

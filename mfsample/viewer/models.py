@@ -3,12 +3,9 @@
 A model is read from any `.npz` written by `mfsample.train.checkpoint.save_checkpoint`: a
 training checkpoint (a `TrainState`, leaves under `.model.`), a light-planning checkpoint
 (the same with transfer matrices in place of SH colour) or a round of camera planning
-(`mfsample.planning.rounds`, the `Model` itself). No template state is needed: the groups,
-capacity and rank are read from the arrays, so the viewer needs no training config.
-
-The sampler's B_hat bounds are not stored (they only clamp B_hat during training and play no
-part in sampling theta(z) = mean + B_hat z): the spec read here carries the largest float32
-as every bound, which clamps nothing (SamplerSpec refuses an infinite bound).
+(`mfsample.planning.rounds`, the `Model` itself). No template state is needed: the arrays
+give the groups and the capacity, the file's metadata the sampler spec that made them
+(`SamplerSpec.to_dict`), so the viewer needs no training config.
 """
 
 import functools
@@ -18,18 +15,18 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from mfsample import uncertainty as unc
+from mfsample import view_uncertainty as unc
 from mfsample.mean_render import render_mean
-from mfsample.model import Model, Params, SamplerSpec, mean_gaussians
+from mfsample.model import Model, Params, mean_gaussians
 from mfsample.renderer import sh as sh_lib
 from mfsample.renderer.budget import render_with_budget
 from mfsample.renderer.projection import covariance_3d
 from mfsample.renderer.settings import RenderSettings
+from mfsample.samplers import SamplerSpec, sample_z
 from mfsample.train import checkpoint as ckpt
 
 # Leaf names of a saved Model, alone or inside a TrainState (`jax.tree_util.keystr` paths).
-_NO_CLAMP = float(np.finfo(np.float32).max)
-_LEAF = re.compile(r"^(?:\.model)?\.(?:params\.(mean|spread)|(signs))\['(\w+)'\]$")
+_LEAF = re.compile(r"^(?:\.model)?\.(?:params\.(mean|b_hat)|(signs))\['(\w+)'\]$")
 _FLAT = re.compile(r"^(?:\.model)?\.(mask|sh_degree)$")
 
 
@@ -37,23 +34,22 @@ class ModelFileError(ValueError):
   """A file that holds no readable model (the message names it)."""
 
 
-def read_model(path, sampler_kind="lowrank") -> Model:
+def read_model(path) -> Model:
   """The `Model` saved in the `.npz` at `path`.
 
   Args:
     path: a checkpoint or round file (module docstring).
-    sampler_kind: the job's `sampler.kind` ("lowrank", "block", "diagonal" or
-      "deterministic"); the arrays do not tell lowrank from block.
 
   Raises:
-    ModelFileError: the file is unreadable or holds no model.
+    ModelFileError: the file is unreadable, holds no model, or does not record its sampler.
   """
   try:
     with np.load(path, allow_pickle=False) as data:
       arrays = {name: data[name] for name in data.files if name != "__meta__"}
+    meta = ckpt.read_meta(path)
   except (OSError, ValueError, EOFError) as e:
     raise ModelFileError(f"{path} is unreadable ({type(e).__name__}: {e})") from e
-  groups = {"mean": {}, "spread": {}, "signs": {}}
+  groups = {"mean": {}, "b_hat": {}, "signs": {}}
   flat = {}
   for name, value in arrays.items():
     if m := _LEAF.match(name):
@@ -62,17 +58,18 @@ def read_model(path, sampler_kind="lowrank") -> Model:
       flat[m.group(1)] = value
   if not groups["mean"] or "mask" not in flat:
     raise ModelFileError(f"{path} holds no model (no mean parameters and mask)")
-  spread = groups["spread"]
-  kind = sampler_kind if spread else "deterministic"
-  rank = 1
-  if spread and kind in ("lowrank", "block"):
-    any_group = next(iter(spread))
-    rank = int(spread[any_group].shape[-1])
-  spec = SamplerSpec(kind=kind, rank=rank, groups=tuple(spread),
-                     bounds=tuple((g, _NO_CLAMP) for g in spread))
-  return Model(params=Params(mean=groups["mean"], spread=spread), signs=groups["signs"],
-               mask=flat["mask"].astype(bool), sh_degree=np.asarray(flat.get("sh_degree", 0)),
-               spec=spec)
+  record = meta.get("sampler") or (meta.get("model") or {}).get("sampler")
+  try:
+    spec = SamplerSpec.from_dict(record)
+  except ValueError as e:
+    raise ModelFileError(f"{path} does not record the sampler that made its model ({e}): "
+                         "it was written by an older mfsample; rerun the job") from e
+  if not set(groups["b_hat"]) <= set(spec.groups):
+    raise ModelFileError(f"{path}: its arrays hold B_hat of {sorted(groups['b_hat'])}, its "
+                         f"sampler record names the groups {list(spec.groups)}")
+  return Model(params=Params(mean=groups["mean"], b_hat=groups["b_hat"]),
+               signs=groups["signs"], mask=flat["mask"].astype(bool),
+               sh_degree=np.asarray(flat.get("sh_degree", 0)), spec=spec)
 
 
 def read_meta(path):
@@ -145,43 +142,37 @@ def _relit_mean_render(model, camera, xi, *, settings):
   return field.render_relit(model.params.mean, model.mask, xi, camera, settings=settings)
 
 
-class Renderer:
-  """Mean renders and per-pixel U maps of one camera at a time, on whatever device JAX has.
+# The first render's budget: small, grown where a render needs more.
+START = RenderSettings(max_intersections=1 << 12)
 
-  Keeps the render budget that sufficed (it grows on overflow, never truncates), so later
-  cameras of the same size reuse the compiled code.
-  """
 
-  def __init__(self, settings=None):
-    self.settings = settings or RenderSettings(max_intersections=1 << 12)
+def render_colour(model, camera, z, background, settings=START):
+  """(mean render [H, W, 3], U map [H, W], U, the settings that sufficed) of a colour model
+  seen by `camera` (the budget grown where it overflows, never a truncated image)."""
+  bg = jnp.asarray(background, jnp.float32)
+  out, settings = render_with_budget(render_mean, settings, model, camera, bg)
+  rgb = np.clip(np.asarray(out.rgb), 0, 1)
+  if z.shape[0] < 2 or not model.spec.stochastic:
+    return rgb, np.zeros(rgb.shape[:2], np.float32), 0.0, settings
+  u, settings = render_with_budget(unc.uncertainty, settings, model, camera, z, background=bg)
+  return rgb, np.asarray(u.pixel_map), float(u.value), settings
 
-  def _fit(self, fn, *args, **kwargs):
-    out, self.settings = render_with_budget(fn, self.settings, *args, **kwargs)
-    return out
 
-  def colour(self, model, camera, z, background):
-    """(mean render [H, W, 3], U map [H, W], U) of a colour model."""
-    bg = jnp.asarray(background, jnp.float32)
-    rgb = self._fit(render_mean, model, camera, bg).rgb
-    if z.shape[0] < 2 or not model.spec.stochastic:
-      return np.clip(np.asarray(rgb), 0, 1), np.zeros(rgb.shape[:2], np.float32), 0.0
-    u = self._fit(unc.uncertainty, model, camera, z, background=bg)
-    return (np.clip(np.asarray(rgb), 0, 1), np.asarray(u.pixel_map),
-            float(u.value))
+def render_relit(model, camera, z, xi, settings=START):
+  """(mean render [H, W, 3], U(xi) map [H, W], U, the settings that sufficed) of a
+  relightable model under the light `xi`."""
+  from mfsample.lighting.uncertainty import light_pixel_map
 
-  def relit(self, model, camera, z, xi):
-    """(mean render [H, W, 3], U(xi) map [H, W], U) of a relightable model under xi."""
-    from mfsample.lighting.uncertainty import light_pixel_map
-
-    xi = jnp.asarray(xi, jnp.float32)
-    rgb = self._fit(_relit_mean_render, model, camera, xi).rgb
-    if z.shape[0] < 2 or not model.spec.stochastic:
-      return np.clip(np.asarray(rgb), 0, 1), np.zeros(rgb.shape[:2], np.float32), 0.0
-    pmap, _, _ = self._fit(light_pixel_map, model, camera, z, xi,
-                           stats_of=lambda out: out[2])
-    return np.clip(np.asarray(rgb), 0, 1), np.asarray(pmap), float(np.sum(pmap))
+  xi = jnp.asarray(xi, jnp.float32)
+  out, settings = render_with_budget(_relit_mean_render, settings, model, camera, xi)
+  rgb = np.clip(np.asarray(out.rgb), 0, 1)
+  if z.shape[0] < 2 or not model.spec.stochastic:
+    return rgb, np.zeros(rgb.shape[:2], np.float32), 0.0, settings
+  (pmap, _, _), settings = render_with_budget(light_pixel_map, settings, model, camera, z, xi,
+                                              stats_of=lambda out: out[2])
+  return rgb, np.asarray(pmap), float(np.sum(pmap)), settings
 
 
 def samples(model, num, seed):
-  """[M, ...] z for U maps: the job's own choice (`uncertainty.uncertainty_z`)."""
-  return unc.uncertainty_z(model, int(num), int(seed))
+  """[M, ...] z for U maps: the job's own choice (`mfsample.samplers.sample_z`)."""
+  return sample_z(model, int(num), seed=int(seed))

@@ -8,7 +8,8 @@ Three jobs answer "where next?":
 | `camera_planning` | `experiments/camera_planning.py`  | one round of one (strategy, seed) run  |
 | `light_planning`  | `experiments/light_planning.py`   | one light chosen by one strategy       |
 
-The kind is told by the fields of the workdir's `config.json`. A `Run` lists its `Step`s from
+The kind is the job that `config.json` records having written the workdir (`_written_by`,
+`mfsample.config_record.WRITTEN_BY`). A `Run` lists its `Step`s from
 the files the job writes (re-read on every call, so the rounds, lights and proposals of a
 running job appear as they are written); a file that is missing, partial or being replaced
 is skipped until a later call. Cameras and ground-truth images come from the job's own
@@ -25,6 +26,7 @@ import ml_collections
 import numpy as np
 
 from mfsample.camera import Camera
+from mfsample.config_record import WRITTEN_BY
 from mfsample.planning import rounds
 from mfsample.train import checkpoint as ckpt
 from mfsample.viewer import models
@@ -134,16 +136,10 @@ def with_poses(reference: Camera, w2c) -> Camera:
 
 
 def run_kind(config):
-  """The kind of job (a key of `KINDS`) whose config dict is `config`, or None."""
-  if not isinstance(config, dict):
-    return None
-  if "next_views" in config and "views" in config:
-    return "next_views"
-  if "round_train" in config and "strategies" in config:
-    return "camera_planning"
-  if "num_lights" in config and "steps_per_light" in config:
-    return "light_planning"
-  return None
+  """The kind of job (a key of `KINDS`) that wrote the config dict `config` (its
+  `_written_by` record), or None when it records none."""
+  record = config.get(WRITTEN_BY) if isinstance(config, dict) else None
+  return record.get("job") if isinstance(record, dict) else None
 
 
 def open_run(workdir):
@@ -164,8 +160,12 @@ def open_run(workdir):
     raise RunError(f"{path} is not a JSON object: the run in {workdir} cannot be read")
   kind = run_kind(config)
   if kind is None:
-    raise RunError(f"{workdir} holds a run of an unknown kind: its config.json has none of "
-                   f"the fields of {_kinds_sentence()}")
+    raise RunError(f"{path} does not record which job wrote {workdir} (no "
+                   f"{WRITTEN_BY!r}: a workdir of mfsample before 0.2); the viewer shows "
+                   f"the workdirs of {_kinds_sentence()}")
+  if kind not in KINDS:
+    raise RunError(f"{workdir} holds a run of the {kind!r} job, which the viewer does not "
+                   f"show; it shows the workdirs of {_kinds_sentence()}")
   return {"next_views": NextViewsRun, "camera_planning": CameraPlanningRun,
           "light_planning": LightPlanningRun}[kind](workdir, config)
 
@@ -189,7 +189,9 @@ class Run:
 
   def __init__(self, workdir, config_dict):
     self.workdir = workdir
-    self.config = ml_collections.ConfigDict(config_dict)
+    self.config = ml_collections.ConfigDict(
+        {k: v for k, v in config_dict.items() if k != WRITTEN_BY})
+    self.written_by = dict(config_dict.get(WRITTEN_BY, {}))
     self.inputs = None
     self.inputs_error = ""
     self._models = {}
@@ -233,13 +235,10 @@ class Run:
     key = (step.model_path, stat)
     if key not in self._models:
       try:
-        self._models = {key: models.read_model(step.model_path, self.sampler_kind())}
+        self._models = {key: models.read_model(step.model_path)}
       except models.ModelFileError:
         return None  # replaced while read: the next poll reads the new file
     return self._models[key]
-
-  def sampler_kind(self):
-    return str(self.config.sampler.kind)
 
   def u_samples(self):
     """(M, Sobol seed) of the job's U."""
@@ -262,15 +261,16 @@ class Run:
 
 
 class NextViewsRun(Run):
-  """The your-data job (`mfsample.next_views`): train or fit, then rank the candidates."""
+  """The your-data job (`mfsample.your_data`): train or fit, then rank the candidates."""
 
   kind = "next_views"
 
   def _load_inputs(self):
+    from mfsample.config_blocks import data_spec
     from mfsample.data import load_dataset
-    from mfsample.next_views.candidates import sphere_candidates
+    from mfsample.your_data.candidates import sphere_candidates
 
-    dataset = load_dataset(self.config.data)
+    dataset = load_dataset(data_spec(self.config.data))
     every = int(self.config.views.train_every)
     index = np.arange(len(dataset.train))
     train_idx, unused_idx = index[index % every == 0], index[index % every != 0]
@@ -361,15 +361,13 @@ class CameraPlanningRun(Run):
   kind = "camera_planning"
 
   def _load_inputs(self):
+    from mfsample.config_blocks import data_spec
     from mfsample.planning.pool import make_pool
 
-    pool = make_pool(self.config.data)
+    pool = make_pool(data_spec(self.config.data))
     return {"candidates": numpy_cameras(pool.candidates.cameras),
             "candidate_images": np.asarray(pool.candidates.images),
             "names": list(pool.candidates.names) if pool.candidates.names else None}
-
-  def sampler_kind(self):
-    return str(self.config.round_train.sampler.kind)
 
   def u_samples(self):
     ours = self.config.strategy.ours
@@ -499,9 +497,10 @@ class LightPlanningRun(Run):
   kind = "light_planning"
 
   def _load_inputs(self):
-    from mfsample.lighting.captures import make_light_data
+    from mfsample.config_blocks import data_spec
+    from mfsample.data.datasets import load_light_data
 
-    data = make_light_data(self.config.data, int(self.config.model.light_coeffs))
+    data = load_light_data(data_spec(self.config.data), int(self.config.model.light_coeffs))
     return {"train": (numpy_cameras(data.train_cameras),
                       [f"camera_{i:02d}" for i in range(len(data.train_cameras))]),
             "basis": data.train_basis}

@@ -1,4 +1,4 @@
-"""Candidate next views: poses on a sphere oriented by the capture, and the top k by U.
+"""Candidate next views of a capture: poses on a sphere oriented by its cameras.
 
 A capture's world frame is arbitrary (COLMAP's has no "up"), so the sphere is placed from
 the training cameras themselves: centred on the scene, with the mean distance of the cameras,
@@ -68,24 +68,3 @@ def sphere_candidates(cameras: Camera, center, num):
   ones = jnp.ones((num,), jnp.float32)
   return Camera(looks.world_to_camera, first.fx * ones, first.fy * ones, first.cx * ones,
                 first.cy * ones, first.width, first.height)
-
-
-def top_k(values, k):
-  """Indices of the k largest `values` [B], largest first (ties: the lower index first); all
-  B of them when k > B.
-
-  Raises:
-    ValueError: k is not an integer >= 0, `values` is not one axis of real numbers, or a
-      value is NaN (an unknown score, e.g. U of an invalid camera, cannot be ranked).
-  """
-  k = arg_checks.check_int("k", k, minimum=0)
-  arg_checks.check_real_dtype("values", values)
-  values = np.asarray(values, np.float64)
-  if values.ndim != 1:
-    raise ValueError(f"values must have shape [B], got {list(values.shape)}")
-  nan = np.flatnonzero(np.isnan(values))
-  if nan.size:
-    raise ValueError(f"values[{int(nan[0])}] is NaN ({nan.size} of {values.size}): a score "
-                     "that is not a number cannot be ranked")
-  order = np.lexsort((np.arange(len(values)), -values))
-  return order[:min(k, len(values))]

@@ -6,7 +6,7 @@
    scene or random Gaussians) and splits its training views: every `views.train_every`-th
    trains, the others are the "unused" candidates;
 2. trains a stochastic field on them (`mfsample.train.train`), or, with `posthoc.ply`, fits
-   B_hat to that model's frozen Gaussians (`mfsample.train.posthoc.fit_spread`); both
+   B_hat to that model's frozen Gaussians (`mfsample.train.posthoc.fit_b_hat`); both
    checkpoint into `workdir/checkpoints` and a killed call resumes from there;
 3. renders every test view with its per-pixel U map (Eq. 10);
 4. scores the candidates (the unused views, or poses on a sphere) by U and proposes the top
@@ -19,8 +19,8 @@ fields), `checkpoints/`, `train_log.json`, `point_cloud.ply` (a trained field's 
 `test/` (renders, U maps as PNG and `uncertainty.npy`, `metrics.json`), `next_views.json`,
 `next_views/` (the proposals as nerfstudio `transforms.json` and `camera_path.json`, the 3DGS
 `cameras.json` SuperSplat imports, a COLMAP text model, and a mean render and U map each:
-`mfsample.next_views.export`), `uncertainty_ply/` (the model with its uncertainty per
-Gaussian over the candidates: `mfsample.next_views.uncertainty_ply`), `next_views.png` and
+`mfsample.your_data.export`), `uncertainty_ply/` (the model with its uncertainty per
+Gaussian over the candidates: `mfsample.your_data.uncertainty_ply`), `next_views.png` and
 `results.json`. A call on a finished workdir returns its results.
 """
 
@@ -31,18 +31,18 @@ import jax.numpy as jnp
 import numpy as np
 
 from mfsample import interrupts, jobs
-from mfsample import uncertainty as unc
+from mfsample.config_blocks import data_spec, speed_only_fields
 from mfsample.data import datasets, resolve_path
-from mfsample.next_views.config import validate
-from mfsample.renderer.budget import Budgets
-from mfsample.train.config import speed_only_fields
+from mfsample.jobs import Budgets
+from mfsample.samplers import sample_z
+from mfsample.your_data.config import validate
 
 
 def run_next_views(config, workdir):
   """Trains or fits, maps the test views' uncertainty and proposes the next views.
 
   Args:
-    config: `mfsample.next_views.default_config()` or a variant (`configs/next_views.py`).
+    config: `mfsample.your_data.default_config()` or a variant (`configs/next_views.py`).
     workdir: output folder (see the module docstring); resumed when it exists.
 
   Returns:
@@ -53,7 +53,7 @@ def run_next_views(config, workdir):
     if finished is not None:
       return finished
     t0 = time.perf_counter()
-    dataset = datasets.load_dataset(config.data)
+    dataset = datasets.load_dataset(data_spec(config.data))
     wd.write_config()
     every = int(config.views.train_every)
     index = np.arange(len(dataset.train))
@@ -68,8 +68,8 @@ def run_next_views(config, workdir):
 
     # One z (M = next_views.samples) for the test maps and the candidates; every render
     # starts from the training's budget (renders of one size share the compiled code).
-    z = unc.uncertainty_z(model, int(config.next_views.samples), int(config.next_views.z_seed))
-    budgets = Budgets(eval=settings, score=settings, mean=settings)
+    z = sample_z(model, int(config.next_views.samples), seed=int(config.next_views.z_seed))
+    budgets = Budgets().replace(eval=settings, score=settings, mean=settings)
     test = _test_maps(config, model, dataset, z, settings, wd)
     center = 0.5 * (np.asarray(dataset.bounds[0], np.float64)
                     + np.asarray(dataset.bounds[1], np.float64))
@@ -80,7 +80,7 @@ def run_next_views(config, workdir):
     if wd.writes:
       files, budgets = _viewer_files(config, model, dataset, proposal, z, budgets, wd)
     if config.next_views.figure and wd.writes:
-      from mfsample.next_views.figure import next_views_figure
+      from mfsample.your_data.figure import next_views_figure
 
       shown = min(4, len(dataset.test))
       next_views_figure(
@@ -119,25 +119,36 @@ def _count(n, noun):
 
 
 def _scene_name(config):
-  kind = config.data.kind
-  if datasets.DATA_KINDS[kind].reads_path:
-    return resolve_path(config.data.path).name
-  return config.data.scene if kind == "scene" else "synthetic"
+  return data_spec(config.data).name
 
 
 def _train_or_fit(config, dataset, train_views, checkpoint_dir):
   """(`TrainResult`, "joint" | "posthoc") with checkpoints in `checkpoint_dir`."""
-  from mfsample.train import train
-  from mfsample.train.posthoc import fit_spread
+  from mfsample.data import ply
+  from mfsample.train.config import recipe, train_spec
+  from mfsample.train.loop import run_training
+  from mfsample.train.posthoc import run_b_hat_fit
 
+  settings, init = train_spec(config)
+  extent = settings.extent
+  if extent is None:  # 3DGS's, from the training cameras
+    extent = datasets.scene_extent(train_views.cameras)
+  seed = int(config.seed)
+  kw = dict(seed=seed, extent=extent, checkpoint_dir=checkpoint_dir,
+            checkpoint_every=config.train.checkpoint_every,
+            keep_checkpoints=config.train.keep_checkpoints, progress=config.train.progress,
+            record={"job": JOB.name})
   if config.posthoc.ply:
-    cfg = config.copy_and_resolve_references()
-    with cfg.unlocked():
-      cfg.train.num_steps = int(config.posthoc.steps)
-    return fit_spread(cfg, train_views, resolve_path(config.posthoc.ply),
-                      checkpoint_dir=checkpoint_dir), "posthoc"
-  return train(config, train_views, bounds=dataset.bounds, checkpoint_dir=checkpoint_dir,
-               points=dataset.points), "joint"
+    path = resolve_path(config.posthoc.ply)
+    # The model as stored: its SH degree is the file's; the fit's length is posthoc.steps.
+    plan = recipe(config, extent=extent, init=init.replace(
+        init_from="ply", ply_path=str(path), sh_degree=ply.sh_degree_of(ply.load_ply(path))))
+    model = plan.initial_model(seed=seed, bounds=dataset.bounds)
+    return run_b_hat_fit(model, train_views,
+                         settings.replace(num_steps=int(config.posthoc.steps)), **kw), "posthoc"
+  plan = recipe(config, extent=extent)
+  model = plan.initial_model(seed=seed, bounds=dataset.bounds, points=dataset.points)
+  return run_training(model, train_views, settings, **kw), "joint"
 
 
 def _test_maps(config, model, dataset, z, settings, wd):
@@ -178,7 +189,7 @@ def _test_maps(config, model, dataset, z, settings, wd):
 
 def _candidates(config, dataset, train_idx, unused_idx, center):
   """(cameras [B], images [B, H, W, 3] or None, names) of the candidates."""
-  from mfsample.next_views.candidates import sphere_candidates
+  from mfsample.your_data.candidates import sphere_candidates
 
   nv = config.next_views
   if nv.candidates == "unused":
@@ -195,9 +206,9 @@ def _propose(config, model, dataset, train_idx, unused_idx, center, z, budgets, 
   record. With candidate images, the error of the mean render there and Spearman's rho of U
   against it (`mfsample.planning.u_error`: U at the scoring size, the squared error at full
   size; rho with the angle to the nearest training view beside it)."""
-  from mfsample.next_views.candidates import top_k
-  from mfsample.next_views.export import preview
   from mfsample.planning.u_error import u_against_error
+  from mfsample.selection import top_k
+  from mfsample.your_data.export import preview
 
   nv = config.next_views
   cameras, images, names = _candidates(config, dataset, train_idx, unused_idx, center)
@@ -206,13 +217,14 @@ def _propose(config, model, dataset, train_idx, unused_idx, center, z, budgets, 
   ranking = u_against_error(
       model, cameras, z, background=dataset.background, images=images,
       train_cameras=dataset.train.cameras[train_idx] if images is not None else None,
-      center=center, score_downscale=int(nv.score_downscale), budgets=budgets, batch=16,
+      center=center, score_downscale=int(nv.score_downscale),
+      score_settings=budgets.get("score"), mean_settings=budgets.get("mean"), batch=16,
       on_batch=lambda done: bar.update(done - bar.n))
   bar.close()
-  budgets = ranking.budgets
+  budgets = budgets.replace(score=ranking.score_settings, mean=ranking.mean_settings)
   top = top_k(ranking.u, int(nv.k))
   # The proposals' mean renders and U maps at full size (written again by _viewer_files).
-  renders, maps, u_maps, settings = preview(model, cameras[top], z, settings=budgets.eval,
+  renders, maps, u_maps, settings = preview(model, cameras[top], z, settings=budgets.get("eval"),
                                             background=dataset.background)
   budgets = budgets.replace(eval=settings)
   w2c = np.asarray(cameras.world_to_camera, np.float64)
@@ -240,22 +252,17 @@ def _viewer_files(config, model, dataset, proposal, z, budgets, wd):
     ({"next_views": folder, "uncertainty_ply": [files]}, relative to the workdir; budgets).
   """
   from mfsample.gaussian_uncertainty import gaussian_uncertainty
-  from mfsample.next_views.export import export_next_views
-  from mfsample.next_views.uncertainty_ply import write_uncertainty_plys
+  from mfsample.your_data.export import export_next_views
+  from mfsample.your_data.uncertainty_ply import write_uncertainty_plys
 
   top = np.asarray(proposal["top"], int)
   names = [f"{rank + 1:02d}_{proposal['record']['names'][i]}" for rank, i in enumerate(top)]
-  applied = None
-  if config.data.kind == "nerfstudio":  # the capture's, so nerfstudio sees one world
-    from mfsample.data._io import read_json
-    from mfsample.data.nerfstudio import applied_transform
-
-    path = resolve_path(config.data.path)
-    meta = read_json(path if path.suffix == ".json" else path / "transforms.json")
-    applied = applied_transform(meta)[:3] if "applied_transform" in meta else None
+  # A capture's files speak of its tools' world (nerfstudio's applied_transform), so that its
+  # tools see one world.
+  applied = dataset.world_transform
   background = jnp.asarray(dataset.background, jnp.float32)
   _, settings = export_next_views(
-      wd.file("next_views"), model, proposal["cameras"][top], z, settings=budgets.eval,
+      wd.file("next_views"), model, proposal["cameras"][top], z, settings=budgets.get("eval"),
       background=background, names=names, images=proposal["images"],
       applied_transform=applied,
       previews=(proposal["renders"], proposal["maps"], proposal["map_sums"]))
@@ -291,5 +298,5 @@ def report(results, workdir):
 
 # Fields that change only how a call looks or how fast it goes: a later call may differ.
 FREE_FIELDS = ("train.progress", "next_views.figure") + speed_only_fields()
-JOB = jobs.Job("next views", run_next_views, validate, FREE_FIELDS,
+JOB = jobs.Job("next views", "next_views", run_next_views, validate, FREE_FIELDS,
                ("results.json", "checkpoints"), report=report, progress_field="train.progress")

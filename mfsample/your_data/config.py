@@ -14,12 +14,13 @@ selects variants; any field is overridden on the command line, e.g.
 import ml_collections
 
 from mfsample import config_checks as checks
-from mfsample.data import DATA_KINDS, resolve_path
-from mfsample.model import STOCHASTIC_KINDS
+from mfsample.config_blocks import data_spec
+from mfsample.data import resolve_path
+from mfsample.data.datasets import kinds_offering
+from mfsample.samplers import STOCHASTIC_KINDS
 from mfsample.train import config as training_variants
 from mfsample.train.config import default_config as training_config
 from mfsample.train.config import validate as validate_training
-from mfsample.train.initial import INIT_FROM
 
 
 def default_config():
@@ -77,21 +78,19 @@ def validate(config):
   the field and its range."""
   validate_training(config)  # every training field (data, model, sampler, loss, ..., eval)
   checks.check_choice(config, "sampler.kind", STOCHASTIC_KINDS)
-  checks.check_choice(config, "model.init_from", INIT_FROM)
   checks.check_choice(config, "next_views.candidates", ("unused", "sphere"))
   for field in ("views.train_every", "next_views.k", "next_views.score_downscale",
                 "next_views.sphere_views", "posthoc.steps", "train.num_steps"):
     checks.check_int(config, field, minimum=1)
   checks.check_int(config, "next_views.samples", minimum=2)  # one sample: U = 0
   checks.check_int(config, "eval.save_images", minimum=0)
-  kind = DATA_KINDS[config.data.kind]  # a known kind: checked by the training validator
-  if kind.holdout:  # the held-out split of a capture
-    checks.check_int(config, "data.holdout_every", minimum=2)
-  if config.model.init_from == "points" and not kind.points and not config.posthoc.ply:
-    with_points = ", ".join(repr(k) for k, v in DATA_KINDS.items() if v.points)
+  data = data_spec(config.data)  # (checked by the training validator)
+  if config.model.init_from == "points" and "points" not in data.offers and not \
+      config.posthoc.ply:
+    with_points = ", ".join(map(repr, kinds_offering("points")))
     raise checks.ConfigError(f"config.model.init_from = 'points' needs the sparse points of a "
                              f"capture ({with_points}), but config.data.kind = "
-                             f"{config.data.kind!r}")
+                             f"{data.kind!r}")
   if config.next_views.candidates == "unused" and config.views.train_every == 1:
     raise checks.ConfigError("config.views.train_every = 1 trains on every view and leaves no "
                              "unused candidate: set it > 1 or next_views.candidates = 'sphere'")
@@ -126,7 +125,7 @@ def tiny(config):
   small = training_variants.get_config("tiny")
   for block in ("data", "model", "train", "densify", "loss", "render", "eval"):
     config[block] = small[block]
-  config.data.synthetic.num_train = 12
+  config.data.num_train = 12
   config.densify.start = config.densify.stop = 1_000  # fixed shapes: one compilation
   config.eval.save_images = 2
   config.views.train_every = 2  # 6 training views, 6 candidates

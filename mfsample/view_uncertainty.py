@@ -26,6 +26,7 @@ import numpy as np
 
 from mfsample import arg_checks, samplers
 from mfsample.camera import Camera
+from mfsample.model import Model, sample
 from mfsample.renderer import TileStats, render
 from mfsample.renderer.budget import render_with_budget
 from mfsample.renderer.settings import RenderSettings
@@ -63,21 +64,7 @@ def sample_gaussians(model, z):
     model: a `mfsample.model.Model`.
     z: [M, *samplers.z_shape(model)].
   """
-  return jax.vmap(lambda zi: samplers.sample(model, zi))(z)
-
-
-def uncertainty_z(model, num_samples, seed=0):
-  """[M, *z_shape] samples for U: the first M scrambled Sobol points (low rank; paper Sec.
-  4.4) or seeded uniforms (diagonal, block); zero-size for a deterministic model."""
-  if isinstance(num_samples, bool) or not isinstance(num_samples, (int, np.integer)) or (
-      num_samples < 1):
-    raise ValueError(f"num_samples must be an integer >= 1 (M; U needs M >= 2 to be "
-                     f"non-zero), got {num_samples!r}")
-  arg_checks.check_seed("seed", seed)
-  rows = None
-  if model.spec.kind == "lowrank" and model.spec.stochastic:
-    rows = samplers.sobol_z(num_samples, model.spec.rank, seed)
-  return samplers.draw_z(model, num_samples, jax.random.PRNGKey(seed), rows)
+  return jax.vmap(lambda zi: sample(model, zi))(z)
 
 
 def uncertainty_of_samples(gaussians_m, camera: Camera, *, settings: RenderSettings,
@@ -107,7 +94,7 @@ def check_z(model, z, sync=False):
   got = tuple(np.shape(z))
   if len(got) != 1 + len(want) or got[1:] != want or got[0] < 1:
     raise ValueError(f"z must have shape [M >= 1, {', '.join(map(str, want))}] (M samples for "
-                     f"the {model.spec.kind} sampler, e.g. uncertainty_z(model, 2)), got "
+                     f"the {model.spec.kind} sampler, e.g. sample_z(model, 2)), got "
                      f"{list(got)}")
   arg_checks.check_finite("z", z, axis_name="sample", sync=sync)
 
@@ -120,8 +107,9 @@ def check_background(background, channels=3):
   arg_checks.check_finite("background", background)
 
 
-def uncertainty(model, camera: Camera, z, *, settings: RenderSettings = RenderSettings(),
-                background=None, num_devices=1) -> Uncertainty:
+def uncertainty(model: Model, camera: Camera, z: jax.Array, *,
+                settings: RenderSettings = RenderSettings(),
+                background: jax.Array | None = None, num_devices: int = 1) -> Uncertainty:
   """U of a stochastic model seen from one camera (Eq. 10), and its per-pixel map.
 
   Differentiable w.r.t. the camera (and the model): e.g.
@@ -130,7 +118,7 @@ def uncertainty(model, camera: Camera, z, *, settings: RenderSettings = RenderSe
   Args:
     model: `mfsample.model.Model` (any sampler kind; deterministic gives U = 0).
     camera: one unbatched `Camera`.
-    z: [M, *samplers.z_shape(model)] samples, e.g. `uncertainty_z(model, 2)`.
+    z: [M, *samplers.z_shape(model)] samples, e.g. `sample_z(model, 2)`.
     settings: `RenderSettings` (static). Check `stats.overflow`: an overflowing render is
       incomplete; grow the budget (`mfsample.renderer.budget.fit_budget`) and call again.
     background: [3] colour behind the Gaussians (default black).
@@ -203,7 +191,7 @@ def score_cameras(model, cameras: Camera, z, *, settings: RenderSettings, backgr
   Args:
     model: `mfsample.model.Model`.
     cameras: `Camera` batched over [B].
-    z: [M, *z_shape] samples (`uncertainty_z`).
+    z: [M, *z_shape] samples (`mfsample.samplers.sample_z`).
     settings: starting `RenderSettings`.
     background: [3] colour (default black).
     chunk_size: cameras vmapped together (see `map_cameras`).

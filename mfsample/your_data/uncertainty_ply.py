@@ -23,8 +23,8 @@ import os
 import numpy as np
 
 from mfsample.data.ply import ply_arrays, write_ply
-from mfsample.next_views.export import colour_mapped
 from mfsample.renderer.sh import rgb_to_sh_dc
+from mfsample.your_data.export import colour_mapped
 
 COLOURED = "coloured_by_uncertainty.ply"
 OWN_COLOURS = "model_colours.ply"
