@@ -21,6 +21,9 @@ sampler a scrambled Sobol sequence (paper Sec. 4.3) unless the spec asks for uni
 the per-Gaussian samplers pseudo-random uniforms (Sobol sequences stop at 21201 dimensions
 and bring nothing at millions). `sample_z` is the one way to draw the z of U.
 
+A new kind is its maths (a z-shape function and an offsets function) and one `SamplerKind`
+entry in `KINDS`: validators, configs, checkpoints, tables and the viewer read the registry.
+
 B_hat is held as raw entries (`Params.b_hat`) with a fixed random sign each: B_hat =
 relu(raw) * sign (paper Sec. 4.3; `signed_b_hat`), clamped into [0, bound] after every
 optimiser step (`clamp_b_hat`). With z ~ U[-1, 1] (variance 1/3 per component), the
@@ -34,6 +37,7 @@ realisation into `Gaussians`.
 import dataclasses
 import math
 import warnings
+from collections.abc import Callable
 
 import jax
 import jax.numpy as jnp
@@ -55,60 +59,90 @@ DEFAULT_BOUNDS = {"means": 1.0, "log_scales": 20.0, "quats": 2.0, "opacity_logit
 # ------------------------------------------------------------------ the kinds
 
 
+def _no_z(rank, capacity, channels):
+  return (0,)
+
+
+def _shared_z(rank, capacity, channels):
+  return (rank,)
+
+
+def _block_z(rank, capacity, channels):
+  return (capacity, rank)
+
+
+def _entry_z(rank, capacity, channels):
+  return (capacity, channels)
+
+
+def _no_offsets(b_hat, z):
+  return {}
+
+
+def _lowrank_offsets(b_hat, z):
+  """B_hat [C, ..., k] @ z [k]: k uniforms shared by the whole model."""
+  return {g: b @ z for g, b in b_hat.items()}
+
+
+def _block_offsets(b_hat, z):
+  """One block of k columns per Gaussian: sum_j B_hat[c, ..., j] z[c, j]."""
+  out = {}
+  for g, b in b_hat.items():
+    zc = z.reshape((z.shape[0],) + (1,) * (b.ndim - 2) + (z.shape[1],))
+    out[g] = jnp.sum(b * zc, axis=-1)
+  return out
+
+
+def _diagonal_offsets(b_hat, z):
+  """One uniform per entry: the groups' entries side by side along z's last axis."""
+  out, offset = {}, 0
+  for g, b in b_hat.items():
+    size = math.prod(b.shape[1:])
+    out[g] = b * z[:, offset:offset + size].reshape(b.shape)
+    offset += size
+  return out
+
+
 @dataclasses.dataclass(frozen=True)
 class SamplerKind:
-  """What one kind of B_hat is: the properties every other module asks the spec.
+  """What one kind of B_hat is: the properties every other module asks the spec, and its
+  maths.
 
   Attributes:
     name: the kind's name in configs, records and checkpoints.
     stochastic: whether it has a B_hat at all.
     rank_axis: whether a B_hat entry carries a trailing axis of k columns.
-    z_per_gaussian: whether z has a leading capacity axis [C] (Gaussians independent).
     sobol: whether its z can be scrambled Sobol points (k dimensions at most 21201).
     covariance: the covariance of theta, for docs and tables.
     label: its name in tables ("Ours": the paper's low-rank B_hat).
+    z_shape: (rank k, capacity C, stochastic entries per Gaussian D) -> the shape of one z.
+    offsets: (B_hat {group: [C, ...]} in canonical group order, one z) -> {group: B_hat z}.
   """
 
   name: str
   stochastic: bool
   rank_axis: bool
-  z_per_gaussian: bool
   sobol: bool
   covariance: str
   label: str
+  z_shape: Callable
+  offsets: Callable
 
-  def z_shape(self, rank, capacity, channels):
-    """The shape of one z for a model of `capacity` rows and `channels` stochastic entries
-    per Gaussian."""
-    if not self.stochastic:
-      return (0,)
-    if not self.z_per_gaussian:
-      return (rank,)
-    return (capacity, rank if self.rank_axis else channels)
-
-  def offsets(self, b_hat, z):
-    """{group: B_hat z} of one z (`b_hat` in canonical group order)."""
-    out, offset = {}, 0
-    for g, b in b_hat.items():
-      if not self.z_per_gaussian:  # [C, ..., k] @ [k]
-        out[g] = b @ z
-      elif self.rank_axis:  # one block of k columns per Gaussian
-        zc = z.reshape((z.shape[0],) + (1,) * (b.ndim - 2) + (z.shape[1],))
-        out[g] = jnp.sum(b * zc, axis=-1)
-      else:  # one uniform per entry, groups side by side along z's last axis
-        size = math.prod(b.shape[1:])
-        out[g] = b * z[:, offset:offset + size].reshape(b.shape)
-        offset += size
-    return out
+  @property
+  def z_per_gaussian(self):
+    """Whether z has a leading capacity axis [C] (Gaussians independent)."""
+    return len(self.z_shape(1, 2, 3)) == 2
 
 
 KINDS = {kind.name: kind for kind in (
-    SamplerKind("deterministic", False, False, False, False, "0 (plain 3DGS)", "Deterministic"),
-    SamplerKind("diagonal", True, False, True, False, "diagonal", "Diagonal"),
-    SamplerKind("block", True, True, True, False, "block diagonal, one rank-k block per "
-                "Gaussian", "Block"),
-    SamplerKind("lowrank", True, True, False, True, "B_hat B_hat^T, rank k (paper Eq. 7)",
-                "Ours"),
+    SamplerKind("deterministic", False, False, False, "0 (plain 3DGS)", "Deterministic",
+                _no_z, _no_offsets),
+    SamplerKind("diagonal", True, False, False, "diagonal", "Diagonal", _entry_z,
+                _diagonal_offsets),
+    SamplerKind("block", True, True, False, "block diagonal, one rank-k block per Gaussian",
+                "Block", _block_z, _block_offsets),
+    SamplerKind("lowrank", True, True, True, "B_hat B_hat^T, rank k (paper Eq. 7)", "Ours",
+                _shared_z, _lowrank_offsets),
 )}
 # The kinds of B_hat (`SamplerSpec.kind`): the one definition every validator reads.
 SAMPLER_KINDS = tuple(KINDS)
