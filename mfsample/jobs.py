@@ -155,13 +155,15 @@ class Workdir:
 
   def progress(self, total, desc=None, **kwargs):
     """A tqdm progress bar, shown when the config's progress flag is set (by process 0)."""
-    from tqdm.auto import tqdm
-
     from mfsample.config_checks import get_field
 
+    show = bool(self.writes and get_field(self.config, self.job.progress_field))
+    if show:
+      from tqdm.auto import tqdm
+    else:  # tqdm.auto in a notebook without ipywidgets warns even for a hidden bar
+      from tqdm import tqdm
     return tqdm(total=total, desc=desc or self.job.name, dynamic_ncols=True,
-                disable=not (self.writes and get_field(self.config, self.job.progress_field)),
-                **kwargs)
+                disable=not show, **kwargs)
 
 
 @dataclasses.dataclass(frozen=True)

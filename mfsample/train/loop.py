@@ -353,6 +353,16 @@ def _check_views(views, model):
     raise ValueError(f"model must be a mfsample.Model, got {type(model).__name__}")
 
 
+def _progress_bar(show, **kwargs):
+  """A tqdm bar; a hidden one is the plain bar, since `tqdm.auto` in a notebook without
+  ipywidgets warns even for a bar that is never shown."""
+  if show:
+    from tqdm.auto import tqdm
+  else:
+    from tqdm import tqdm
+  return tqdm(disable=not show, dynamic_ncols=True, **kwargs)
+
+
 def run_training(model: Model, views: Views, settings: TrainSettings, *, seed, extent=None,
                  state=None, num_views=None, stop_at=None, checkpoint_dir=None,
                  checkpoint_every=500, keep_checkpoints=2, record=None, progress=False,
@@ -382,8 +392,6 @@ def run_training(model: Model, views: Views, settings: TrainSettings, *, seed, e
   Returns:
     `TrainResult`.
   """
-  from tqdm.auto import tqdm
-
   _check_views(views, model)
   checkpoint_every = arg_checks.check_int("checkpoint_every", checkpoint_every, minimum=1)
   keep_checkpoints = arg_checks.check_int("keep_checkpoints", keep_checkpoints, minimum=1)
@@ -409,9 +417,8 @@ def run_training(model: Model, views: Views, settings: TrainSettings, *, seed, e
   data = to_device(views)
   step = int(state.step)
   end = settings.num_steps if stop_at is None else min(int(stop_at), settings.num_steps)
-  bar = tqdm(total=settings.num_steps, initial=step,
-             disable=not (progress and distributed.is_writer()), desc=f"train {spec.kind}",
-             dynamic_ncols=True)
+  bar = _progress_bar(progress and distributed.is_writer(), total=settings.num_steps,
+                      initial=step, desc=f"train {spec.kind}")
   t0 = time.perf_counter()
 
   def meta():
