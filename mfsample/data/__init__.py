@@ -3,8 +3,8 @@
 * loaders and writers: `load_blender` / `export_blender`, `load_colmap` / `export_colmap`,
   `load_nerfstudio` / `export_nerfstudio`, `load_llff`, `load_ply` / `export_ply`;
   `camera_export` writes cameras in viewers' formats;
-* `load_dataset(config.data)`: the training and test views a config names, dispatched on
-  `config.data.kind` over `DATA_KINDS` (`datasets`);
+* `load_dataset(spec)`: the training and test views a `DataSpec` names, dispatched on
+  `spec.kind` over `DATA_KINDS` (`datasets`);
 * `synthetic`: random ground-truth scenes rendered by mfsample (no files).
 """
 

@@ -1,4 +1,4 @@
-"""The training config: every field of `train` and `train_and_evaluate`, with its default.
+"""The training config: every field of `train_and_evaluate`, with its default.
 
 `default_config()` trains a stochastic Gaussian field on the built-in Mitsuba scene at
 128 x 128. `configs/train.py` selects variants of it (lego, a tiny synthetic scene) on the

@@ -1,6 +1,6 @@
 """The config of `run_next_views`: uncertainty maps and next views for a dataset or a .ply.
 
-`default_config()` is a training config (`mfsample.train.default_config()`: the dataset, the
+`default_config()` is a training config (`mfsample.train.config.default_config()`: the dataset, the
 model, B_hat, the loss, the optimiser, densification and the render budget, each field with
 its comment there) with the job's defaults below, plus three blocks of its own: `posthoc`
 (bring a trained 3DGS model), `views` (which views train, which are candidates) and

@@ -5,7 +5,7 @@
 1. loads the dataset of `config.data` (NeRF Synthetic, LLFF, a COLMAP capture, a built-in
    scene or random Gaussians) and splits its training views: every `views.train_every`-th
    trains, the others are the "unused" candidates;
-2. trains a stochastic field on them (`mfsample.train.train`), or, with `posthoc.ply`, fits
+2. trains a stochastic field on them (`mfsample.train.run_training`), or, with `posthoc.ply`, fits
    B_hat to that model's frozen Gaussians (`mfsample.train.posthoc.fit_b_hat`); both
    checkpoint into `workdir/checkpoints` and a killed call resumes from there;
 3. renders every test view with its per-pixel U map (Eq. 10);
