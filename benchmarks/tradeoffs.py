@@ -83,7 +83,7 @@ def load_run(workdir, data=None):
   from mfsample.data import datasets as data_lib
   from mfsample.train import loop
   from mfsample.train.config import recipe
-  from mfsample.workdir import WRITTEN_BY
+  from mfsample.config_record import WRITTEN_BY
 
   with open(os.path.join(workdir, "config.json")) as f:
     record = json.load(f)

@@ -100,7 +100,7 @@ def _comparable(config_dict):
   the record of the job and version that wrote it)."""
   from mfsample._json import without_fields
   from mfsample.config_blocks import speed_only_fields
-  from mfsample.workdir import WRITTEN_BY
+  from mfsample.config_record import WRITTEN_BY
 
   return without_fields({k: v for k, v in config_dict.items() if k != WRITTEN_BY},
                         speed_only_fields() + ("train.progress",))

@@ -31,6 +31,14 @@ def fit_budget(settings: RenderSettings, stats: TileStats, *,
 
   Grows to the next power of two >= the padded intersection count (never shrinks unless
   `allow_shrink`, so a training loop does not oscillate between compilations).
+
+  Args:
+    settings: the settings the render ran with.
+    stats: its `TileStats` (any leading batch axes: the largest count decides).
+    allow_shrink: also lower the budget when the render needed less.
+
+  Returns:
+    `settings`, or a copy with the budget that holds the render.
   """
   budget = required_budget(settings, stats)
   if not allow_shrink:
