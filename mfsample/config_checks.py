@@ -14,10 +14,10 @@ instead of a ZeroDivisionError an hour later. `field` is a dotted path into the 
 """
 
 import contextlib
-import math
 import re
-from numbers import Integral, Real
+from numbers import Integral
 
+from mfsample import settings_checks as sc
 from mfsample.settings_checks import SettingsError
 
 
@@ -40,35 +40,27 @@ def _name(prefix, field):
   return f"{prefix}.{field}"
 
 
+def _by_rule(check, config, field, prefix, *args, **kwargs):
+  """The config field checked by a `settings_checks` rule (the rules are stated once there),
+  its error naming the config field."""
+  value = get_field(config, field)
+  try:
+    return check(field, value, *args, **kwargs)
+  except sc.SettingsError as e:
+    raise ConfigError(f"{_name(prefix, field)} = {value!r}: must be {e.rule}") from None
+
+
 def check_int(config, field, *, minimum=None, maximum=None, optional=False, prefix="config"):
   """An integer in [minimum, maximum] (None when `optional`). Returns it."""
-  value = get_field(config, field)
-  if value is None and optional:
-    return None
-  bounds = _bounds_text(minimum, maximum)
-  if (isinstance(value, bool) or not isinstance(value, Integral)
-      or (minimum is not None and value < minimum) or (maximum is not None and value > maximum)):
-    raise ConfigError(f"{_name(prefix, field)} = {value!r}: must be an integer{bounds}"
-                      + (" or None" if optional else ""))
-  return int(value)
+  return _by_rule(sc.check_int, config, field, prefix, minimum=minimum, maximum=maximum,
+                  optional=optional)
 
 
 def check_float(config, field, *, minimum=None, maximum=None, above=None, below=None,
                 optional=False, prefix="config"):
   """A finite number with minimum <= value <= maximum, above < value < below. Returns it."""
-  value = get_field(config, field)
-  if value is None and optional:
-    return None
-  ok = isinstance(value, Real) and not isinstance(value, bool) and math.isfinite(value)
-  ok = ok and (minimum is None or value >= minimum) and (maximum is None or value <= maximum)
-  ok = ok and (above is None or value > above) and (below is None or value < below)
-  if not ok:
-    parts = [t for t in (_bounds_text(minimum, maximum),
-                         f" > {above}" if above is not None else "",
-                         f" < {below}" if below is not None else "") if t]
-    raise ConfigError(f"{_name(prefix, field)} = {value!r}: must be a finite number"
-                      + ",".join(parts) + (" or None" if optional else ""))
-  return float(value)
+  return _by_rule(sc.check_float, config, field, prefix, minimum=minimum, maximum=maximum,
+                  above=above, below=below, optional=optional)
 
 
 def check_bool(config, field, *, prefix="config"):
@@ -95,21 +87,8 @@ def check_floats(config, field, length, *, minimum=None, maximum=None, increasin
                  prefix="config"):
   """A list or tuple of `length` finite numbers in [minimum, maximum], strictly increasing
   when `increasing` (a (low, high) range). Returns it as a tuple of floats."""
-  value = get_field(config, field)
-  name = _name(prefix, field)
-  bounds = _bounds_text(minimum, maximum)
-  what = (f"must be {length} finite numbers{bounds}"
-          + (", strictly increasing" if increasing else ""))
-  if isinstance(value, (str, bytes)) or not hasattr(value, "__len__") or len(value) != length:
-    raise ConfigError(f"{name} = {value!r}: {what}")
-  items = tuple(value)
-  for item in items:
-    if (isinstance(item, bool) or not isinstance(item, Real) or not math.isfinite(item)
-        or (minimum is not None and item < minimum) or (maximum is not None and item > maximum)):
-      raise ConfigError(f"{name} = {value!r}: {what}")
-  if increasing and any(b <= a for a, b in zip(items[:-1], items[1:], strict=True)):
-    raise ConfigError(f"{name} = {value!r}: {what}")
-  return tuple(float(v) for v in items)
+  return _by_rule(sc.check_floats, config, field, prefix, length, minimum=minimum,
+                  maximum=maximum, increasing=increasing)
 
 
 def check_order(config, low_field, high_field, *, strict=False, prefix="config"):
@@ -154,16 +133,6 @@ def check_sequence(config, field, *, item_choices=None, item_minimum=None, min_l
       raise ConfigError(f"{name} = {value!r}: repeats {', '.join(repeated)}; each must "
                         "appear once")
   return items
-
-
-def _bounds_text(minimum, maximum):
-  if minimum is not None and maximum is not None:
-    return f" in [{minimum}, {maximum}]"
-  if minimum is not None:
-    return f" >= {minimum}"
-  if maximum is not None:
-    return f" <= {maximum}"
-  return ""
 
 
 def with_variants(config, variant, variants, where):
