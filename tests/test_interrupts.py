@@ -17,16 +17,26 @@ from mfsample.train import loop
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
-def test_a_signal_is_a_request_checked_at_safe_points():
-  with interrupts.stop_at_safe_points():
-    interrupts.check()  # nothing requested
-    os.kill(os.getpid(), signal.SIGTERM)
-    assert interrupts.requested() == signal.SIGTERM
-    with pytest.raises(interrupts.Interrupted, match="stopped on SIGTERM at step 3") as e:
-      interrupts.check("at step 3")
-    assert e.value.exit_code == 143
-  interrupts.check()  # the request ends with the block
-  assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+@pytest.mark.parametrize("sigint_before", ["as started", "ignored"])
+def test_a_signal_is_a_request_checked_at_safe_points(sigint_before):
+  # Whatever handlers the process started with (a shell's `&` leaves SIGINT ignored), the
+  # block restores them.
+  started_with = signal.getsignal(signal.SIGINT)
+  if sigint_before == "ignored":
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+  before = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+  try:
+    with interrupts.stop_at_safe_points():
+      interrupts.check()  # nothing requested
+      os.kill(os.getpid(), signal.SIGTERM)
+      assert interrupts.requested() == signal.SIGTERM
+      with pytest.raises(interrupts.Interrupted, match="stopped on SIGTERM at step 3") as e:
+        interrupts.check("at step 3")
+      assert e.value.exit_code == 143
+    interrupts.check()  # the request ends with the block
+    assert {s: signal.getsignal(s) for s in before} == before
+  finally:
+    signal.signal(signal.SIGINT, started_with)
 
 
 def test_a_second_ctrl_c_stops_at_once():
