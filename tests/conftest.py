@@ -63,6 +63,62 @@ def _bounded_memory_maps():
     gc.collect()
 
 
+# ------------------------------------------------------------------------- compilation report
+# The suite's time is XLA compilation: the end of every run prints how many programs the test
+# processes traced and compiled (and how many compilations the persistent cache answered),
+# summed over the xdist workers, beside pytest's 15 slowest tests (`--durations=15`).
+# Subprocesses that tests start (the jobs' command lines) are not counted.
+
+_TRACE_EVENT = "/jax/core/compile/jaxpr_trace_duration"
+_COMPILE_EVENT = "/jax/core/compile/backend_compile_duration"  # compiled or read from cache
+_CACHE_HIT_EVENT = "/jax/compilation_cache/cache_hits"
+_compile_counts = {"traces": 0, "compile_requests": 0, "cache_hits": 0, "compile_seconds": 0.0}
+
+
+def _on_duration(event, duration_secs, **_):
+  if event == _TRACE_EVENT:
+    _compile_counts["traces"] += 1
+  elif event == _COMPILE_EVENT:
+    _compile_counts["compile_requests"] += 1
+    _compile_counts["compile_seconds"] += duration_secs
+
+
+def _on_event(event, **_):
+  if event == _CACHE_HIT_EVENT:
+    _compile_counts["cache_hits"] += 1
+
+
+def pytest_configure(config):
+  from jax import monitoring
+
+  monitoring.register_event_duration_secs_listener(_on_duration)
+  monitoring.register_event_listener(_on_event)
+  config._mfsample_compile_counts = [] if not hasattr(config, "workerinput") else None
+
+
+def pytest_sessionfinish(session):
+  if hasattr(session.config, "workeroutput"):  # an xdist worker: hand the counts over
+    session.config.workeroutput["mfsample_compile_counts"] = dict(_compile_counts)
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_testnodedown(node, error):
+  counts = getattr(node, "workeroutput", {}).get("mfsample_compile_counts")
+  if counts is not None:
+    node.config._mfsample_compile_counts.append(counts)
+
+
+def pytest_terminal_summary(terminalreporter, config):
+  runs = config._mfsample_compile_counts or [dict(_compile_counts)]
+  total = {k: sum(r[k] for r in runs) for k in _compile_counts}
+  compiled = total["compile_requests"] - total["cache_hits"]
+  terminalreporter.write_sep("=", "XLA compilations")
+  terminalreporter.write_line(
+      f"{total['traces']} traces, {compiled} programs compiled "
+      f"({total['cache_hits']} more read from the persistent cache), "
+      f"{total['compile_seconds']:.0f} s compiling, in {len(runs)} test process(es)")
+
+
 # ------------------------------------------------------------------------- training fixtures
 # A tiny synthetic scene rendered once per session. Compiled functions are shared through the
 # library's module-level jits (`render`, `train_step_jit`, which take their settings as
