@@ -134,7 +134,7 @@ def test_a_candidate_without_a_score_is_grey(tmp_path):
 
 
 def test_a_your_data_proposal_is_named_by_rank_not_by_its_file_name(tmp_path):
-  next_views_workdir(tmp_path)
+  next_views_workdir(tmp_path, steps=())  # no model: nothing to render (fast)
   viewer = app.start(tmp_path, port=0)
   tab = Tab(viewer)
   try:
@@ -165,3 +165,20 @@ def test_the_docs_screenshot_command_writes_into_a_workdir():
 def test_the_default_step_of_a_run_opened_as_a_library_call(tmp_path):
   planning_workdir(tmp_path)
   assert default_step(open_run(tmp_path).steps()).title == SEL_2
+
+
+def test_a_step_that_cannot_be_drawn_is_said_in_its_tab_alone(viewer):
+  a, b = viewer.open_tab(), viewer.open_tab()
+
+  def broken(step):
+    raise ValueError("no room for frustums")
+
+  a.tab._draw_cameras = broken
+  _choose(a, a.tab.step_dropdown, SEL_1)
+  assert "**drawing the step failed** (ValueError: no room for frustums)" in (
+      a.tab.status.content)
+  assert "failed" not in b.tab.status.content
+  del a.tab._draw_cameras
+  _choose(a, a.tab.step_dropdown, SEL_2)  # the next step draws, and the message goes
+  assert "failed" not in a.tab.status.content
+  assert a.tab.scene.get_handle_by_name("/candidates/0") is not None

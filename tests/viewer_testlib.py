@@ -65,7 +65,7 @@ def next_views_workdir(workdir, steps=(10, 20), proposal=True, candidates=6, inp
          "world_to_camera": poses[i].tolist(), "intrinsics": INTRINSICS}
         for r, i in enumerate(top)]}
     write_json(workdir / "next_views.json", record)
-    write_json(workdir / "results.json", {"steps": int(steps[-1])})
+    write_json(workdir / "results.json", {"steps": int(steps[-1]) if steps else 0})
   return workdir
 
 

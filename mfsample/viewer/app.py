@@ -365,7 +365,7 @@ class Tab:
         return
       if event.client is not None:  # a person chose a step: stop following
         self.follow.value = False
-      self.show_step_named(self.step_dropdown.value)
+      self.guarded(lambda: self.show_step_named(self.step_dropdown.value))
 
     @self.follow.on_update
     def _(_):
@@ -379,9 +379,8 @@ class Tab:
 
     @self.splat_colour.on_update
     def _(_):
-      with self.viewer.lock:
-        if self.step is not None:
-          self._draw_splats(self.step, self.viewer.run.model(self.step))
+      if self.step is not None:
+        self.guarded(lambda: self._draw_splats(self.step, self.viewer.run.model(self.step)))
 
     @self.show_train.on_update
     def _(_):
@@ -409,11 +408,16 @@ class Tab:
   def update(self):
     """Shows the viewer's latest read of the run: the default step while following, else
     the chosen one redrawn when its files changed. Errors are shown, never raised."""
+    self.guarded(self._update)
+
+  def guarded(self, draw):
+    """Runs `draw()` under the viewer's lock, then shows the run's state in the panel; an
+    error of drawing is shown there too (one bad step must not take the tab down)."""
     with self.viewer.lock:
       try:
-        self._update()
+        draw()
         error = ""
-      except Exception as e:  # noqa: BLE001 - one bad step must not take the tab down
+      except Exception as e:  # noqa: BLE001 - shown in the panel, the tab stays up
         error = f"**drawing the step failed** ({type(e).__name__}: {e})"
       self.status.content = "  \n".join(self.viewer.status_lines() + ([error] if error else []))
       self.problems.content = "\n".join(self.viewer.problem_lines())

@@ -9,12 +9,12 @@ Three jobs answer "where next?":
 | `light_planning`  | `experiments/light_planning.py`   | one light chosen by one strategy       |
 
 The kind is the job that `config.json` records having written the workdir (`_written_by`,
-`mfsample.config_record.WRITTEN_BY`). A `Run` lists its `Step`s from
-the files the job writes (re-read on every call, so the rounds, lights and proposals of a
-running job appear as they are written); a file that is missing, partial or being replaced
-is skipped until a later call. Cameras and ground-truth images come from the job's own
-inputs (its dataset, pool or captures, rebuilt from `config.json` with the library's loaders
-by `load_inputs`); without them the viewer shows what the workdir alone holds.
+`mfsample.config_record.WRITTEN_BY`). A `Run` lists its `Step`s from the files the job
+writes (re-read on every call, so the rounds, lights and proposals of a running job appear
+as they are written; the jobs write every file atomically, so a file not there yet is
+skipped until a later call). Cameras and ground-truth images come from the job's own inputs
+(its dataset, pool or captures, rebuilt from `config.json` with the library's loaders by
+`load_inputs`); without them the viewer shows what the workdir alone holds.
 
 Damage is reported, not fatal: the model of a step is its newest readable checkpoint (the one
 the job resumes from, `mfsample.train.checkpoint.newest_readable`), and a file that cannot be
