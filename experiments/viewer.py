@@ -1,11 +1,13 @@
 """The capture planner in the browser: a job's workdir shown with viser (docs/viewer.md).
 
   python experiments/viewer.py --workdir=workdirs/camera_planning
-  python experiments/viewer.py --workdir=workdirs/camera_planning --screenshot=page.png
+  python experiments/viewer.py --workdir=workdirs/camera_planning \
+      --screenshot=workdirs/camera_planning/viewer.png
 
 Opens the workdir of the your-data job (experiments/next_views.py), camera planning or light
 planning, finished or running, and prints the address to open. Binds to this machine only
-(127.0.0.1) unless --host says otherwise; a running job's new steps appear as it writes them.
+(127.0.0.1) unless --host says otherwise; a running job's new steps appear as it writes them,
+a workdir no job has written yet is waited for, and damaged files are named in the panel.
 """
 
 import sys
@@ -20,7 +22,8 @@ _HOST = flags.DEFINE_string("host", "127.0.0.1", "Address to listen on: 127.0.0.
 _PORT = flags.DEFINE_integer("port", 8080, "Port to listen on (0: any free port).")
 _POLL = flags.DEFINE_float("poll_seconds", 2.0, "How often the workdir is read again.")
 _SCREENSHOT = flags.DEFINE_string("screenshot", None, "Save a PNG of the page as headless "
-                                  "Chromium shows it to this path, and exit.")
+                                  "Chromium shows it at this path (its folder created), and "
+                                  "exit.")
 flags.mark_flags_as_required(["workdir"])
 
 

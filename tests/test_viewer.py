@@ -15,6 +15,7 @@ import jax
 import numpy as np
 import pytest
 from planning_testlib import random_model, tiny_config, tiny_pool
+from viewer_testlib import Tab, next_views_workdir
 
 from mfsample import config_record
 from mfsample.planning import rounds, strategies
@@ -23,7 +24,7 @@ from mfsample.planning.pool import stack_cameras
 from mfsample.train import checkpoint as ckpt
 from mfsample.viewer import app, models
 from mfsample.viewer.browser import Browser, find_chromium
-from mfsample.viewer.runs import RunError, open_run
+from mfsample.viewer.runs import RunError, default_step, open_run
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -76,7 +77,8 @@ def _command(*args):
 
 @pytest.mark.slow
 def test_the_command_says_what_is_wrong_without_a_traceback(tmp_path):
-  empty = _command(f"--workdir={tmp_path}")
+  # A screenshot has no run to wait for (the server waits: test_viewer_damage.py).
+  empty = _command(f"--workdir={tmp_path}", f"--screenshot={tmp_path / 'page.png'}")
   assert empty.returncode == 1 and "Traceback" not in empty.stderr
   assert f"error: {tmp_path} holds no run" in empty.stderr
   _planning_config(tiny_config(), tmp_path)
@@ -112,6 +114,14 @@ def test_a_saved_model_reads_back_as_it_was(tmp_path):
     models.read_model(ckpt.save_checkpoint(str(tmp_path / "empty"), {}, {"step": 1}))
   with pytest.raises(models.ModelFileError, match="does not record the sampler"):
     models.read_model(ckpt.save_checkpoint(str(tmp_path / "old"), model, {"step": 1}))
+  with pytest.raises(models.ModelFileError, match="do not hold one model"):
+    bad = model.replace(mask=np.asarray(model.mask)[:5])
+    models.read_model(ckpt.save_checkpoint(str(tmp_path / "bad"), bad, {
+        "step": 1, "sampler": model.spec.to_dict()}))
+  with open(path, "r+b") as f:  # cut short: as a job's checkpoint, unreadable
+    f.truncate(100)
+  with pytest.raises(ckpt.CorruptCheckpointError, match="ckpt_00000001.npz is unreadable"):
+    models.read_model(path)
 
 
 def _round(workdir, strategy, pool, model, views):
@@ -162,10 +172,64 @@ def test_a_round_records_the_scores_the_choice_and_the_model(planning_workdir):
 
 
 @pytest.mark.slow
+def test_the_panel_shows_u_as_the_job_defines_it(planning_workdir):
+  """U of a candidate on screen is the job's: the same samples, at the size the job scores
+  at, so it equals the score the round recorded."""
+  workdir, _, pool, _, choice = planning_workdir
+  viewer = app.start(workdir, port=0)
+  tab = None
+  try:
+    tab = Tab(viewer)
+    panel = tab.tab
+    step = panel.step
+    model = viewer.run.model(step)
+    scores = np.asarray(choice.info["scores"])
+    down = tiny_config().strategy.score_downscale
+    for i in range(len(pool.candidates)):
+      camera = step.candidates[0][i]
+      rgb, pmap, u = viewer.renders(step, model, camera, ("candidates", i))
+      assert rgb.shape == (camera.height, camera.width, 3)
+      assert pmap.shape == (camera.height // down, camera.width // down)
+      np.testing.assert_allclose(u, scores[i], rtol=1e-4)
+    info = panel.camera_info.content  # the first proposal, shown on opening
+    assert info.startswith(f"**next view 1** · candidate {step.candidates[1][choice.index]}")
+    w, h = pool.candidates.cameras.width // down, pool.candidates.cameras.height // down
+    assert (f"U (Eq. 10) at {w} x {h}, 1/{down} of the image as the job scores, M = "
+            f"{tiny_config().strategy.ours.select_samples}: ") in info
+    assert f"U as the job scored it: {scores[choice.index]:.4g}" in info
+    assert "ground truth · mean render" in info and panel.views_image.visible
+  finally:
+    if tab is not None:
+      tab.close()
+    viewer.server.stop()
+
+
+@pytest.mark.slow
+def test_the_your_data_panel_shows_each_view_with_its_ground_truth(tmp_path):
+  next_views_workdir(tmp_path, inputs=True)
+  viewer = app.start(tmp_path, port=0)
+  tab = None
+  try:
+    assert viewer.run.inputs_error == ""
+    tab = Tab(viewer)
+    panel = tab.tab
+    info = panel.camera_info.content
+    assert info.startswith("**next view 1** · candidate ")
+    assert "ground truth · mean render (32 x 32) · U map (32 x 32;" in info
+    truth = viewer.run.ground_truth(panel.step, "candidates", 5)
+    assert truth.shape == (32, 32, 3) and truth.std() > 0
+    assert viewer.run.ground_truth(panel.step, "train", 0).shape == (32, 32, 3)
+  finally:
+    if tab is not None:
+      tab.close()
+    viewer.server.stop()
+
+
+@pytest.mark.slow
 def test_the_page_shows_the_plan_and_follows_the_run(planning_workdir, tmp_path):
   """The viewer on a planning workdir, loaded in headless Chromium: the scene's objects (by
-  viser's API and by the page's scene tree), the proposal's render and U map in the panel,
-  and a round written while it runs appearing without a restart."""
+  viser's API and by the page's scene tree), the proposal's ground truth, render and U map in
+  view, and a round written while it runs appearing without a restart."""
   if find_chromium() is None:
     pytest.skip("no Chromium on PATH: apt-get install chromium (.ci/run installs it) to run "
                 "the viewer's browser test")
@@ -175,40 +239,45 @@ def test_the_page_shows_the_plan_and_follows_the_run(planning_workdir, tmp_path)
   t0, cpu0 = time.perf_counter(), time.process_time()
   viewer = app.start(workdir, port=0)
   try:
-    scene = viewer.server.scene
-    assert isinstance(scene.get_handle_by_name("/splats"), viser.GaussianSplatHandle)
-    assert isinstance(scene.get_handle_by_name("/train/0"), viser.CameraFrustumHandle)
-    assert isinstance(scene.get_handle_by_name("/next/1"), viser.CameraFrustumHandle)
-    scores = np.asarray(choice.info["scores"])
-    colours = app.colormap(scores)
-    for i in range(len(pool.candidates)):  # the candidates are coloured by U
-      assert tuple(scene.get_handle_by_name(f"/candidates/{i}").color) == tuple(colours[i])
-    first = viewer.step.title
+    first = default_step(viewer.steps).title
     with Browser(size=(1280, 900)) as browser:
       browser.open(f"http://127.0.0.1:{viewer.server.get_port()}/")
       browser.wait_for_text(first)
+      (tab,) = viewer.tabs.values()
+      scene = tab.scene
+      assert isinstance(scene.get_handle_by_name("/splats"), viser.GaussianSplatHandle)
+      assert isinstance(scene.get_handle_by_name("/train/0"), viser.CameraFrustumHandle)
+      assert isinstance(scene.get_handle_by_name("/next/1"), viser.CameraFrustumHandle)
+      scores = np.asarray(choice.info["scores"])
+      colours = app.colormap(scores)
+      for i in range(len(pool.candidates)):  # the candidates are coloured by U
+        assert tuple(scene.get_handle_by_name(f"/candidates/{i}").color) == tuple(colours[i])
       text = browser.text()
       for node in ("/splats", "/train", "/candidates", "/next"):  # the scene tree
         assert node in text, node
-      assert "candidates coloured by U" in text and "next #1" in text
+      assert "candidates coloured by U" in text and "next view 1" in text
       assert f"U as the job scored it: {scores[choice.index]:.4g}" in text
-      assert len(viewer.server.get_clients()) == 1
-      # The panel's images: mean render, U map and ground truth, decoded by the page.
-      assert browser.wait_for("Array.from(document.images).filter(i => i.complete && "
-                              "i.naturalWidth >= 24).length >= 3")
+      # The ground truth, render and U map side by side, decoded and inside the window.
+      strip = (f"Array.from(document.images).filter(i => i.complete && "
+               f"i.naturalHeight == {app.STRIP_HEIGHT})")
+      assert browser.wait_for(f"{strip}.length == 1")
+      assert browser.evaluate(f"{strip}[0].getBoundingClientRect().bottom <= "
+                              "window.innerHeight")
 
       # The job writes its next round: the page follows without a restart.
       _round(workdir, strategy, pool, model, [0, choice.index])
       viewer.refresh()
-      second = viewer.step.title
+      second = tab.step.title
       assert second != first and "on 2 views" in second
       assert isinstance(scene.get_handle_by_name("/train/1"), viser.CameraFrustumHandle)
       browser.wait_for_text(second)
 
-      # The splats coloured by each Gaussian's share of U over the candidates.
+      # The splats coloured by each Gaussian's share of U over the candidates, on a bar of
+      # their own.
       before = scene.get_handle_by_name("/splats")
-      viewer.splat_colour.value = "share of U"
+      tab.splat_colour.value = "share of U"
       assert scene.get_handle_by_name("/splats") is not before
+      assert tab.splat_bar.visible and tab.bar.visible
       browser.wait_for_text("splats coloured by share of U")
       browser.screenshot(str(tmp_path / "viewer.png"))
   finally:
@@ -220,6 +289,16 @@ def test_the_page_shows_the_plan_and_follows_the_run(planning_workdir, tmp_path)
   assert pixels.shape[:2] == (900, 1280) and pixels.std() > 10  # not a blank page
   print(f"browser test: {time.perf_counter() - t0:.1f} s, {time.process_time() - cpu0:.1f} s "
         "of this process's CPU time")
+
+
+@pytest.mark.slow
+def test_a_screenshot_is_written_where_asked(planning_workdir, tmp_path):
+  if find_chromium() is None:
+    pytest.skip("no Chromium on PATH: apt-get install chromium to run the viewer's "
+                "screenshot test")
+  path = tmp_path / "new folder" / "page.png"
+  app.screenshot(planning_workdir[0], str(path), settle=1.0)
+  assert path.is_file() and sorted(os.listdir(path.parent)) == ["page.png"]
 
 
 @pytest.mark.slow

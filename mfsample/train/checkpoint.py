@@ -28,8 +28,8 @@ _PATTERN = re.compile(r"^ckpt_(\d+)\.npz$")
 # What reading a damaged .npz raises: a truncated or overwritten zip (BadZipFile, EOFError,
 # OSError), a corrupt member (zlib.error, ValueError from numpy's header parser), a missing
 # metadata entry (KeyError) or metadata that is not JSON.
-_READ_ERRORS = (zipfile.BadZipFile, EOFError, OSError, zlib.error, ValueError, KeyError,
-                json.JSONDecodeError)
+READ_ERRORS = (zipfile.BadZipFile, EOFError, OSError, zlib.error, ValueError, KeyError,
+               json.JSONDecodeError)
 
 
 class CorruptCheckpointError(ValueError):
@@ -81,12 +81,50 @@ def list_checkpoints(directory):
   return [os.path.join(directory, name) for _, name in sorted(found)]
 
 
+def newest_readable(directory, read):
+  """The newest checkpoint in `directory` that `read` can read, and the newer ones it could not.
+
+  Jobs resume from it (`mfsample.train.loop.restore_latest`) and the viewer shows it: a
+  checkpoint cut short (a full disk, a copy interrupted) is passed over for the one before.
+
+  Args:
+    directory: a checkpoint folder.
+    read: path -> value; raises `CorruptCheckpointError` for a file it cannot read. Any
+      other error propagates (a readable checkpoint of another run is not passed over).
+
+  Returns:
+    (path, read(path), skipped) of the newest readable checkpoint, or (None, None, skipped)
+    when there is none; skipped: (path, `CorruptCheckpointError`) of each newer one, newest
+    first.
+  """
+  skipped = []
+  for path in reversed(list_checkpoints(directory)):
+    try:
+      return path, read(path), skipped
+    except CorruptCheckpointError as e:
+      skipped.append((path, e))
+  return None, None, skipped
+
+
+def read_arrays(path):
+  """(arrays, meta) of a checkpoint file: every saved leaf by its pytree path, and the
+  metadata dict (`CorruptCheckpointError` if the file cannot be read)."""
+  meta = read_meta(path)
+  try:
+    with np.load(path, allow_pickle=False) as data:
+      arrays = {name: data[name] for name in data.files if name != "__meta__"}
+  except READ_ERRORS as e:
+    raise CorruptCheckpointError(f"checkpoint {path} is unreadable "
+                                 f"({type(e).__name__}: {e})") from e
+  return arrays, meta
+
+
 def read_meta(path):
   """The metadata dict of a checkpoint file (`CorruptCheckpointError` if unreadable)."""
   try:
     with np.load(path, allow_pickle=False) as data:
       meta = json.loads(str(data["__meta__"]))
-  except _READ_ERRORS as e:
+  except READ_ERRORS as e:
     raise CorruptCheckpointError(f"checkpoint {path} is unreadable "
                                  f"({type(e).__name__}: {e})") from e
   if not isinstance(meta, dict) or not isinstance(meta.get("step"), int):
@@ -115,7 +153,7 @@ def restore_checkpoint(path, template):
     with np.load(path, allow_pickle=False) as data:
       saved = set(data.files) - {"__meta__"}
       values = {name: data[name] for name in names if name in saved}
-  except _READ_ERRORS as e:
+  except READ_ERRORS as e:
     raise CorruptCheckpointError(f"checkpoint {path} is unreadable "
                                  f"({type(e).__name__}: {e})") from e
   if saved != set(names):

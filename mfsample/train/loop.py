@@ -300,27 +300,27 @@ def restore_latest(directory, setup: TrainSetup, initial_state: Callable, check=
   Raises:
     ckpt.CorruptCheckpointError: checkpoints exist but none can be read.
   """
-  paths = ckpt.list_checkpoints(directory)
-  if not paths:
+  if not ckpt.list_checkpoints(directory):
     return None
-  unreadable = []
-  for path in reversed(paths):
-    try:
-      meta = ckpt.read_meta(path)
-      if check is not None:
-        check(meta, path)
-      template = densify_lib.grow_capacity(initial_state(), meta["capacity"])
-      state, meta = ckpt.restore_checkpoint(path, template)
-    except ckpt.CorruptCheckpointError as e:
-      warnings.warn(f"{e}; trying an older checkpoint", stacklevel=2)
-      unreadable.append(str(e))
-      continue
-    # Rounded: the checkpoint's run may have composited more or fewer chunks per step.
-    settings = setup.step_config.settings.holding_budget(meta["max_intersections"])
-    return state, setup.with_settings(settings), meta
-  raise ckpt.CorruptCheckpointError(
-      f"no readable checkpoint in {directory}: {'; '.join(unreadable)}. Remove them to "
-      "train from scratch.")
+
+  def read(path):
+    meta = ckpt.read_meta(path)
+    if check is not None:
+      check(meta, path)
+    template = densify_lib.grow_capacity(initial_state(), meta["capacity"])
+    return ckpt.restore_checkpoint(path, template)
+
+  path, restored, unreadable = ckpt.newest_readable(directory, read)
+  for _, e in unreadable:
+    warnings.warn(f"{e}; trying an older checkpoint", stacklevel=2)
+  if path is None:
+    raise ckpt.CorruptCheckpointError(
+        f"no readable checkpoint in {directory}: {'; '.join(str(e) for _, e in unreadable)}. "
+        "Remove them to train from scratch.")
+  state, meta = restored
+  # Rounded: the checkpoint's run may have composited more or fewer chunks per step.
+  settings = setup.step_config.settings.holding_budget(meta["max_intersections"])
+  return state, setup.with_settings(settings), meta
 
 
 def _check_same_run(setup: TrainSetup, spec, meta, path):

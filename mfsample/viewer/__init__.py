@@ -6,6 +6,16 @@ camera-planning and light-planning jobs write; `models` reads and renders their 
 extra `viewer`, which brings viser).
 """
 
-from mfsample.viewer.runs import KINDS, Proposal, Run, RunError, Step, open_run
+from mfsample.viewer.runs import (
+    KINDS,
+    NoRunYet,
+    Proposal,
+    Run,
+    RunError,
+    Step,
+    default_step,
+    open_run,
+)
 
-__all__ = ["KINDS", "Proposal", "Run", "RunError", "Step", "open_run"]
+__all__ = ["KINDS", "NoRunYet", "Proposal", "Run", "RunError", "Step", "default_step",
+           "open_run"]

@@ -41,14 +41,11 @@ def read_model(path) -> Model:
     path: a checkpoint or round file (module docstring).
 
   Raises:
-    ModelFileError: the file is unreadable, holds no model, or does not record its sampler.
+    mfsample.train.checkpoint.CorruptCheckpointError: the file cannot be read (cut short,
+      overwritten): the viewer then shows the checkpoint before it, as a job resumes from it.
+    ModelFileError: the file is readable but holds no model, or does not record its sampler.
   """
-  try:
-    with np.load(path, allow_pickle=False) as data:
-      arrays = {name: data[name] for name in data.files if name != "__meta__"}
-    meta = ckpt.read_meta(path)
-  except (OSError, ValueError, EOFError) as e:
-    raise ModelFileError(f"{path} is unreadable ({type(e).__name__}: {e})") from e
+  arrays, meta = ckpt.read_arrays(path)
   groups = {"mean": {}, "b_hat": {}, "signs": {}}
   flat = {}
   for name, value in arrays.items():
@@ -58,27 +55,26 @@ def read_model(path) -> Model:
       flat[m.group(1)] = value
   if not groups["mean"] or "mask" not in flat:
     raise ModelFileError(f"{path} holds no model (no mean parameters and mask)")
-  record = meta.get("sampler") or (meta.get("model") or {}).get("sampler")
+  model_record = meta.get("model")
+  record = meta.get("sampler") or (model_record.get("sampler") if isinstance(
+      model_record, dict) else None)
   try:
     spec = SamplerSpec.from_dict(record)
-  except ValueError as e:
+  except (ValueError, TypeError, AttributeError) as e:
     raise ModelFileError(f"{path} does not record the sampler that made its model ({e}): "
                          "it was written by an older mfsample; rerun the job") from e
   if not set(groups["b_hat"]) <= set(spec.groups):
     raise ModelFileError(f"{path}: its arrays hold B_hat of {sorted(groups['b_hat'])}, its "
                          f"sampler record names the groups {list(spec.groups)}")
+  capacity = np.shape(flat["mask"])[:1]
+  wrong = sorted(f"{kind} {g} {np.shape(v)}" for kind in ("mean", "b_hat")
+                 for g, v in groups[kind].items() if np.shape(v)[:1] != capacity)
+  if len(capacity) != 1 or wrong:
+    raise ModelFileError(f"{path}: its arrays do not hold one model (mask "
+                         f"{np.shape(flat['mask'])}; {', '.join(wrong) or 'no Gaussians'})")
   return Model(params=Params(mean=groups["mean"], b_hat=groups["b_hat"]),
                signs=groups["signs"], mask=flat["mask"].astype(bool),
                sh_degree=np.asarray(flat.get("sh_degree", 0)), spec=spec)
-
-
-def read_meta(path):
-  """The metadata dict of a checkpoint or round file, or None when it cannot be read (a file
-  being replaced by a running job is read again at the next poll)."""
-  try:
-    return ckpt.read_meta(path)
-  except (ckpt.CorruptCheckpointError, OSError):
-    return None
 
 
 def is_relightable(model):
@@ -146,31 +142,35 @@ def _relit_mean_render(model, camera, xi, *, settings):
 START = RenderSettings(max_intersections=1 << 12)
 
 
-def render_colour(model, camera, z, background, settings=START):
-  """(mean render [H, W, 3], U map [H, W], U, the settings that sufficed) of a colour model
-  seen by `camera` (the budget grown where it overflows, never a truncated image)."""
-  bg = jnp.asarray(background, jnp.float32)
-  out, settings = render_with_budget(render_mean, settings, model, camera, bg)
-  rgb = np.clip(np.asarray(out.rgb), 0, 1)
+def render_image(model, camera, background, light=None, settings=START):
+  """(mean render [H, W, 3] in [0, 1], the settings that sufficed) of the step's model seen
+  by `camera`: SH colour over `background`, or a relightable model under the SH light
+  `light` [n] (the budget grown where it overflows, never a truncated image)."""
+  if is_relightable(model):
+    out, settings = render_with_budget(_relit_mean_render, settings, model, camera,
+                                       jnp.asarray(light, jnp.float32))
+  else:
+    out, settings = render_with_budget(render_mean, settings, model, camera,
+                                       jnp.asarray(background, jnp.float32))
+  return np.clip(np.asarray(out.rgb), 0, 1), settings
+
+
+def render_u(model, camera, z, background, light=None, settings=START):
+  """(U map [H, W], U, the settings that sufficed) of `camera`: the per-pixel map of Eq. 10
+  and its sum U, with the samples `z` [M, ...]; for a relightable model U(xi) under the
+  light `light` [n]. A deterministic model, or M < 2, gives zeros."""
   if z.shape[0] < 2 or not model.spec.stochastic:
-    return rgb, np.zeros(rgb.shape[:2], np.float32), 0.0, settings
-  u, settings = render_with_budget(unc.uncertainty, settings, model, camera, z, background=bg)
-  return rgb, np.asarray(u.pixel_map), float(u.value), settings
+    return np.zeros((camera.height, camera.width), np.float32), 0.0, settings
+  if is_relightable(model):
+    from mfsample.lighting.uncertainty import light_pixel_map
 
-
-def render_relit(model, camera, z, xi, settings=START):
-  """(mean render [H, W, 3], U(xi) map [H, W], U, the settings that sufficed) of a
-  relightable model under the light `xi`."""
-  from mfsample.lighting.uncertainty import light_pixel_map
-
-  xi = jnp.asarray(xi, jnp.float32)
-  out, settings = render_with_budget(_relit_mean_render, settings, model, camera, xi)
-  rgb = np.clip(np.asarray(out.rgb), 0, 1)
-  if z.shape[0] < 2 or not model.spec.stochastic:
-    return rgb, np.zeros(rgb.shape[:2], np.float32), 0.0, settings
-  (pmap, _, _), settings = render_with_budget(light_pixel_map, settings, model, camera, z, xi,
-                                              stats_of=lambda out: out[2])
-  return rgb, np.asarray(pmap), float(np.sum(pmap)), settings
+    (pmap, _, _), settings = render_with_budget(
+        light_pixel_map, settings, model, camera, z, jnp.asarray(light, jnp.float32),
+        stats_of=lambda out: out[2])
+    return np.asarray(pmap), float(np.sum(pmap)), settings
+  u, settings = render_with_budget(unc.uncertainty, settings, model, camera, z,
+                                   background=jnp.asarray(background, jnp.float32))
+  return np.asarray(u.pixel_map), float(u.value), settings
 
 
 def samples(model, num, seed):
