@@ -18,7 +18,10 @@ The entry points initialise from the environment (`initialize_from_environment`)
                                      declared dead and every other one is stopped
 
 Unset, the coordinator address, the number of processes and the process id come from
-JAX's cluster detection (SLURM, Open MPI, Kubernetes, Cloud TPU: `jax.distributed`).
+JAX's cluster detection (SLURM, Open MPI, Kubernetes, Cloud TPU: `jax.distributed`); with
+none of these, the error names every variable to set. Given, the processes hold a roll call
+first (`mfsample.roll_call`): two processes with one id, or with different counts, stop every
+process at once with one line naming the variable.
 
 What happens when a process fails (JAX's coordination service, measured in
 tests/test_distributed.py): a process that is not connected within the init timeout stops
@@ -34,6 +37,7 @@ import sys
 import numpy as np
 
 ENABLE = "MFSAMPLE_DISTRIBUTED"
+ADDRESS = "JAX_COORDINATOR_ADDRESS"
 NUM_PROCESSES = "MFSAMPLE_NUM_PROCESSES"
 PROCESS_ID = "MFSAMPLE_PROCESS_ID"
 INIT_TIMEOUT = "MFSAMPLE_INIT_TIMEOUT"
@@ -64,6 +68,9 @@ def initialize(coordinator_address=None, num_processes=None, process_id=None, *,
   """`jax.distributed.initialize`, with CPU collectives (gloo) for host devices.
 
   Call it first, before anything else runs on a device. None: JAX's cluster detection.
+  With the address, the count and the id all given, the processes first hold a roll call
+  (`mfsample.roll_call`): a repeated id, counts that differ or a missing process stop every
+  process with one line naming the setting, not a C++ abort.
 
   Args:
     coordinator_address: "host:port" of process 0 (None: `JAX_COORDINATOR_ADDRESS`, or the
@@ -72,22 +79,72 @@ def initialize(coordinator_address=None, num_processes=None, process_id=None, *,
     process_id: this process, 0 .. num_processes - 1.
     init_timeout: seconds to wait for every process to connect.
     heartbeat_timeout: seconds of silence after which a process counts as dead.
-  """
-  import jax
 
+  Raises:
+    DistributedError: a malformed address, an id out of range, settings missing with no
+      cluster to detect them from, or a roll call that failed; the message names the setting.
+  """
+  names = {"address": "coordinator_address" if coordinator_address else ADDRESS,
+           "num_processes": "num_processes", "process_id": "process_id",
+           "timeout": f"init_timeout = {init_timeout} s"}
+  _initialize(coordinator_address, num_processes, process_id, int(init_timeout),
+              int(heartbeat_timeout), names)
+
+
+def _initialize(address, num_processes, process_id, init_timeout, heartbeat_timeout, names):
+  """`initialize`, its messages naming the settings as `names` says (see `roll_call.call`)."""
+  address = address or os.environ.get(ADDRESS) or None
+  host_port = None if address is None else parse_address(address, names["address"])
   if num_processes is not None and process_id is not None and not (
       0 <= process_id < num_processes):
-    raise DistributedError(f"process id {process_id} is not in 0 .. {num_processes - 1} "
-                           f"({num_processes} processes)")
+    raise DistributedError(f"{names['process_id']}={process_id}: process id {process_id} is not "
+                           f"in 0 .. {num_processes - 1} ({names['num_processes']}="
+                           f"{num_processes})")
+  import jax
+
   # Collectives between processes on host devices (JAX's default since 0.5; set for older).
   jax.config.update("jax_cpu_collectives_implementation", "gloo")
-  where = coordinator_address or os.environ.get("JAX_COORDINATOR_ADDRESS") or "(detected)"
   print(f"mfsample: process {'?' if process_id is None else process_id} of "
-        f"{'?' if num_processes is None else num_processes} connecting to {where}, waiting "
-        f"at most {init_timeout} s for every process", file=sys.stderr, flush=True)
-  jax.distributed.initialize(coordinator_address, num_processes, process_id,
-                             initialization_timeout=int(init_timeout),
-                             **_heartbeat_arguments(int(heartbeat_timeout)))
+        f"{'?' if num_processes is None else num_processes} connecting to "
+        f"{address or '(detected)'}, waiting at most {init_timeout} s for every process",
+        file=sys.stderr, flush=True)
+  if host_port is not None and num_processes is not None and process_id is not None and (
+      num_processes > 1):
+    from mfsample import roll_call
+
+    try:
+      roll_call.call(*host_port, num_processes, process_id, init_timeout, names)
+    except roll_call.RollCallError as e:
+      raise DistributedError(str(e)) from None
+  try:
+    jax.distributed.initialize(address, num_processes, process_id,
+                               initialization_timeout=init_timeout,
+                               **_heartbeat_arguments(heartbeat_timeout))
+  except ValueError as e:  # raised before connecting: a setting nothing gave
+    given = {"address": address, "num_processes": num_processes, "process_id": process_id}
+    unset = [names[k] for k, v in given.items() if v is None]
+    if not unset:
+      raise
+    raise DistributedError(
+        f"{', '.join(unset)} unset, and no cluster JAX detects (SLURM, Open MPI, Kubernetes, "
+        f"Cloud TPU) gave {'it' if len(unset) == 1 else 'them'} (jax: {e}); set "
+        f"{names['address']}=host:port (process 0's), {names['num_processes']}=n and "
+        f"{names['process_id']}=i (0 .. n - 1) for every process") from None
+
+
+def parse_address(address, name=ADDRESS):
+  """(host, port) of a coordinator address "host:port" ("[::1]:1234" for IPv6).
+
+  Raises:
+    DistributedError: naming `name` when it is not host:port with a port in 1 .. 65535.
+  """
+  host, sep, port = str(address).strip().rpartition(":")
+  if not (sep and host and port.isdigit() and 1 <= int(port) <= 65535):
+    raise DistributedError(f"{name}={address!r} must be host:port: process 0's host name or IP "
+                           "address and a free port, e.g. localhost:12355")
+  if host.startswith("[") and host.endswith("]"):
+    host = host[1:-1]
+  return host, int(port)
 
 
 def _heartbeat_arguments(timeout):
@@ -113,7 +170,9 @@ def initialize_from_environment(environ=None):
   `MFSAMPLE_DISTRIBUTED` is unset or 0 (a single process).
 
   Raises:
-    DistributedError: a variable is malformed (named).
+    DistributedError: a variable is malformed, missing (with no cluster to detect it from) or
+      contradicted by another process's (a repeated `MFSAMPLE_PROCESS_ID`, another
+      `MFSAMPLE_NUM_PROCESSES`); the message names the variable.
   """
   environ = os.environ if environ is None else environ
   flag = environ.get(ENABLE, "").strip()
@@ -121,10 +180,12 @@ def initialize_from_environment(environ=None):
     return False
   if flag != "1":
     raise DistributedError(f"{ENABLE}={flag!r} must be 1 (several processes) or 0")
-  initialize(num_processes=_int_env(environ, NUM_PROCESSES, 1),
-             process_id=_int_env(environ, PROCESS_ID, 0),
-             init_timeout=_int_env(environ, INIT_TIMEOUT, 1) or 300,
-             heartbeat_timeout=_int_env(environ, HEARTBEAT_TIMEOUT, 1) or 100)
+  init_timeout = _int_env(environ, INIT_TIMEOUT, 1) or 300
+  names = {"address": ADDRESS, "num_processes": NUM_PROCESSES, "process_id": PROCESS_ID,
+           "timeout": f"{INIT_TIMEOUT} = {init_timeout} s"}
+  _initialize(environ.get(ADDRESS) or None, _int_env(environ, NUM_PROCESSES, 1),
+              _int_env(environ, PROCESS_ID, 0), init_timeout,
+              _int_env(environ, HEARTBEAT_TIMEOUT, 1) or 100, names)
   return True
 
 

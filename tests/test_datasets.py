@@ -105,6 +105,52 @@ def test_scene_extent_follows_3dgs():
   assert data_lib.scene_extent(cams[:1]) == pytest.approx(2.2)  # one camera: its distance
 
 
+def _tripod(center, spread=0.0, num=6):
+  """`num` cameras looking around a horizontal circle from `center` (float32 poses), their
+  centres `spread` apart along x (a tripod head's offset)."""
+  angles = np.linspace(0.0, 2 * np.pi, num, endpoint=False)
+  eyes = np.asarray(center, np.float64) + np.stack([spread * (np.arange(num) % 2),
+                                                    np.zeros(num), np.zeros(num)], -1)
+  targets = eyes + np.stack([np.cos(angles), np.sin(angles), np.full(num, 0.2)], -1)
+  return Camera.look_at(jnp.asarray(eyes, jnp.float32), jnp.asarray(targets, jnp.float32),
+                        jnp.array([0.0, 0, 1]), 0.8, 8, 8)
+
+
+@pytest.mark.parametrize("scale", [1e-4, 1.0, 1e4])
+def test_scene_extent_of_cameras_turning_about_one_point(scale):
+  """A tripod capture (centres apart by float32 round-off alone, or by less than 1e-3 of their
+  distance from the origin) has no spread to measure: 1.1 x that distance, at any scale; a
+  spread above that follows 3DGS."""
+  far = scale * np.array([100.0, 0.0, 0.0])
+  assert data_lib.scene_extent(_tripod(far)) == pytest.approx(110.0 * scale, rel=1e-6)
+  assert data_lib.scene_extent(_tripod(far, 0.05 * scale)) == pytest.approx(
+      1.1 * np.linalg.norm(far + [0.025 * scale, 0, 0]), rel=1e-6)
+  assert data_lib.scene_extent(_tripod(far, 0.5 * scale)) == pytest.approx(0.275 * scale,
+                                                                           rel=1e-4)
+  ring = Camera.look_at(jnp.asarray([[scale, 0, 0], [-scale, 0, 0], [0, scale, 0]], jnp.float32),
+                        jnp.zeros((3, 3)), jnp.array([0.0, 0, 1]), 0.8, 8, 8)
+  assert data_lib.scene_extent(ring) == pytest.approx(1.1 * scale * np.sqrt(10) / 3,
+                                                      rel=1e-6)
+
+
+def test_scene_extent_of_cameras_at_the_origin_asks_for_it():
+  with pytest.raises(ValueError, match=r"the 6 camera centres all lie at the origin.*give the "
+                                       r"extent .*config.data.extent"):
+    data_lib.scene_extent(_tripod(np.zeros(3)))
+
+
+def test_a_tripod_capture_without_points_gets_the_fallback_extent(tmp_path):
+  """A nerfstudio capture of a tripod at (100, 0, 0) without points: the box around its
+  cameras spans the fallback extent (110), not float round-off."""
+  from mfsample.data import Views, export_nerfstudio
+
+  cams = _tripod([100.0, 0.0, 0.0])
+  export_nerfstudio(tmp_path, Views(np.zeros((6, 8, 8, 3), np.float32), cams))
+  ds = data_lib.load_dataset(DataSpec(kind="nerfstudio", path=str(tmp_path), holdout_every=3))
+  np.testing.assert_allclose(ds.bounds[1] - ds.bounds[0], 220.0, rtol=1e-5)
+  assert data_lib.scene_extent(ds.train.cameras) == pytest.approx(110.0, rel=1e-6)
+
+
 def test_llff_kind_holds_out_every_nth_view_and_boxes_the_frusta(tmp_path):
   import imageio.v3 as iio
 

@@ -262,8 +262,82 @@ def test_a_missing_process_stops_the_run_after_the_init_timeout():
   proc = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True,
                         text=True, timeout=120)
   assert proc.returncode != 0 and "CONNECTED" not in proc.stdout
-  assert "waiting at most 3 s" in proc.stderr and "DEADLINE_EXCEEDED" in proc.stderr
+  assert "waiting at most 3 s" in proc.stderr
+  assert ("DistributedError: processes [1] (MFSAMPLE_PROCESS_ID) did not reach process 0 within "
+          "MFSAMPLE_INIT_TIMEOUT = 3 s") in proc.stderr
   assert time.monotonic() - t0 < 60
+
+
+_CONNECT = textwrap.dedent("""
+    from mfsample import distributed
+    try:
+      distributed.initialize_from_environment()
+    except distributed.DistributedError as e:
+      print("ERROR", e, flush=True)
+      raise SystemExit(2)
+    print("CONNECTED", flush=True)
+""")
+
+
+@pytest.mark.slow
+def test_two_processes_with_one_id_stop_at_once_naming_the_variable():
+  """Three processes for a run of three, two of them with MFSAMPLE_PROCESS_ID=1: every one
+  stops within seconds with one line naming the variable (JAX's service would abort them all
+  with a C++ stack trace after its timeout)."""
+  port = _free_port()
+  t0 = time.monotonic()
+  procs = [subprocess.Popen([sys.executable, "-c", _CONNECT], cwd=ROOT, text=True,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            env=_environment(1, MFSAMPLE_DISTRIBUTED=1,
+                                             JAX_COORDINATOR_ADDRESS=f"localhost:{port}",
+                                             MFSAMPLE_NUM_PROCESSES=3, MFSAMPLE_PROCESS_ID=i))
+           for i in (0, 1, 1)]
+  try:
+    outputs = [p.communicate(timeout=120) for p in procs]
+  finally:
+    for p in procs:
+      if p.poll() is None:
+        p.kill()
+  assert time.monotonic() - t0 < 60  # the default timeouts are 300 s and 100 s
+  for p, (out, err) in zip(procs, outputs, strict=True):
+    assert p.returncode == 2, err[-2000:]
+    (line,) = [x for x in out.splitlines() if x.startswith("ERROR")]
+    assert "two processes have MFSAMPLE_PROCESS_ID=1" in line
+    assert "Check failure" not in err and "ALREADY_EXISTS" not in err
+
+
+def test_the_switch_alone_names_every_variable_to_set():
+  """MFSAMPLE_DISTRIBUTED=1 with no other variable and no cluster to detect them from."""
+  env = _environment(1, MFSAMPLE_DISTRIBUTED=1)
+  for name in ("JAX_COORDINATOR_ADDRESS", "MFSAMPLE_NUM_PROCESSES", "MFSAMPLE_PROCESS_ID",
+               "SLURM_JOB_ID", "OMPI_MCA_orte_hnp_uri", "TPU_WORKER_HOSTNAMES"):
+    env.pop(name, None)
+  proc = subprocess.run([sys.executable, "-c", _CONNECT], cwd=ROOT, env=env,
+                        capture_output=True, text=True, timeout=120)
+  assert proc.returncode == 2, proc.stderr[-2000:]
+  assert ("ERROR JAX_COORDINATOR_ADDRESS, MFSAMPLE_NUM_PROCESSES, MFSAMPLE_PROCESS_ID unset, "
+          "and no cluster JAX detects") in proc.stdout
+  assert ("set JAX_COORDINATOR_ADDRESS=host:port (process 0's), MFSAMPLE_NUM_PROCESSES=n and "
+          "MFSAMPLE_PROCESS_ID=i (0 .. n - 1) for every process") in proc.stdout
+
+
+@pytest.mark.parametrize("address", ["localhost", "localhost:", ":12355", "localhost:abc",
+                                     "localhost:0", "localhost:70000", "12355"])
+def test_a_coordinator_address_without_a_port_is_named(address):
+  environ = {"MFSAMPLE_DISTRIBUTED": "1", "JAX_COORDINATOR_ADDRESS": address,
+             "MFSAMPLE_NUM_PROCESSES": "2", "MFSAMPLE_PROCESS_ID": "0"}
+  with pytest.raises(distributed.DistributedError,
+                     match=rf"^JAX_COORDINATOR_ADDRESS='{address}' must be host:port: process "
+                           "0's host name or IP address and a free port, e.g. localhost:12355$"):
+    distributed.initialize_from_environment(environ)
+  with pytest.raises(distributed.DistributedError, match=rf"^coordinator_address='{address}'"):
+    distributed.initialize(address, 2, 0)
+
+
+def test_coordinator_addresses_are_split():
+  assert distributed.parse_address("localhost:12355") == ("localhost", 12355)
+  assert distributed.parse_address("10.0.0.1:1234") == ("10.0.0.1", 1234)
+  assert distributed.parse_address("[::1]:1234") == ("::1", 1234)
 
 
 @pytest.mark.parametrize("variable, value", [
@@ -279,7 +353,9 @@ def test_malformed_variables_are_named(variable, value):
 def test_a_process_id_out_of_range_is_refused():
   environ = {"MFSAMPLE_DISTRIBUTED": "1", "MFSAMPLE_NUM_PROCESSES": "2",
              "MFSAMPLE_PROCESS_ID": "2"}
-  with pytest.raises(distributed.DistributedError, match="process id 2 is not in 0 .. 1"):
+  with pytest.raises(distributed.DistributedError, match="^MFSAMPLE_PROCESS_ID=2: process id 2 "
+                                                       "is not in 0 .. 1 "
+                                                       r"\(MFSAMPLE_NUM_PROCESSES=2\)$"):
     distributed.initialize_from_environment(environ)
 
 

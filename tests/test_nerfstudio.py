@@ -253,3 +253,179 @@ def test_training_data_and_planning_pool_of_a_capture(tmp_path):
   validate_planning(planning)
   pool = make_pool(data_spec(planning.data))
   assert len(pool.candidates) == 2 and len(pool.test) == 2 and len(pool.points) == 20
+
+
+# ------------------------------------------------------------ a capture read in full or refused
+
+
+def _capture(tmp_path, **views_kw):
+  """An exported capture of 4 frames sharing top-level PINHOLE intrinsics (32 x 24 images)."""
+  export_nerfstudio(tmp_path, _views(same_intrinsics=True, **views_kw))
+  return tmp_path
+
+
+def _write_png(path, value, size=(24, 32)):
+  path.parent.mkdir(parents=True, exist_ok=True)
+  iio.imwrite(path, np.full((*size, 3), value, np.uint8))
+
+
+@pytest.mark.parametrize("change, message", [
+    # A frame listed twice, or the same file spelled twice: both frames named.
+    (lambda m: m["frames"].append(dict(m["frames"][1])),
+     r"frames\[1\] \('images/00001_frame_1.png'\) and frames\[4\] \('images/00001_frame_1.png'\)"
+     r" have the image .*00001_frame_1.png; every frame must be a distinct view"),
+    (lambda m: m["frames"].append({**m["frames"][2], "file_path": "./images/00002_frame_2.png"}),
+     r"frames\[2\] .* and frames\[4\] \('./images/00002_frame_2.png'\) have the image"),
+])
+def test_a_frame_listed_twice_is_refused_naming_both(tmp_path, change, message):
+  root = _capture(tmp_path)
+  _edit(root, change)
+  with pytest.raises(DatasetError, match=message):
+    load_nerfstudio(root)
+
+
+def test_frames_are_named_by_their_path_and_names_never_collide(tmp_path):
+  """`images/a.png` and `a.png` are two views named apart; `a.png` beside `a.jpg` (one name)
+  is refused; frames all under `images/` keep the names without that folder."""
+  root = _capture(tmp_path)
+  meta = json.loads((root / "transforms.json").read_text())
+  first = meta["frames"][0]
+  _write_png(root / "images" / "a.png", 10)
+  _write_png(root / "a.png", 200)
+  _edit(root, lambda m: m.update(frames=[{**first, "file_path": "images/a.png"},
+                                         {**first, "file_path": "a.png"}]))
+  views, _ = load_nerfstudio(root)
+  assert views.names == ("a", "images/a")  # ordered by file path
+  np.testing.assert_allclose(views.images[:, 0, 0, 0], [200 / 255, 10 / 255])
+
+  iio.imwrite(root / "a.jpg", np.zeros((24, 32, 3), np.uint8))
+  _edit(root, lambda m: m.update(frames=[{**first, "file_path": "a.png"},
+                                         {**first, "file_path": "a.jpg"}]))
+  with pytest.raises(DatasetError, match=r"frames\[1\] \('a.jpg'\) and frames\[0\] \('a.png'\) "
+                                         r"have the view name 'a'"):
+    load_nerfstudio(root)
+
+
+@pytest.mark.parametrize("change, message", [
+    # Per-frame camera models and distortion follow the top level's rule.
+    (lambda m: m["frames"][1].update(camera_model="OPENCV_FISHEYE"),
+     r"frame 'images/00001_frame_1.png' has the camera model 'OPENCV_FISHEYE', which the "
+     r"pinhole renderer cannot reproduce; .*--camera-type pinhole"),
+    (lambda m: (m.pop("camera_model"), m["frames"][3].update(camera_model="EQUIRECTANGULAR")),
+     r"frame 'images/00003_frame_3.png' has the camera model 'EQUIRECTANGULAR'"),
+    (lambda m: m["frames"][0].update(camera_model="OPENCV"),
+     r"frame 'images/00000_frame_0.png' has camera_model = 'OPENCV' but the top level says "
+     r"'PINHOLE'"),
+    (lambda m: m.update(camera_model=3), r"'camera_model' must be a string, got 3"),
+    (lambda m: m["frames"][2].update(distortion_params=[0.0, 0.1, 0, 0, 0, 0]),
+     r"frame 'images/00002_frame_2.png' has the camera model 'PINHOLE' with distortion "
+     r"\{'distortion_params': \[0.0, 0.1"),
+    (lambda m: (m.update(distortion_params=[0.0] * 6),
+                m["frames"][1].update(distortion_params=[0, 0, 0, 0, 0.01, 0])),
+     r"frame 'images/00001_frame_1.png' has the camera model .* \{'distortion_params': "),
+    (lambda m: m.update(distortion_params=[0.0, 0.0, 0.0, 0.0, -0.002, 0.0]),
+     r"frame 'images/00000_frame_0.png' has .* \{'distortion_params \(top level\)'"),
+    (lambda m: m["frames"][0].update(k5=0.3), r"distortion \{'k5': 0.3\}"),
+    (lambda m: m.update(distortion_params="abc"),
+     r"frame 'images/00000_frame_0.png' \(top level\): 'distortion_params' must be a list of "
+     r"finite numbers, got 'abc'"),
+    (lambda m: m["frames"][2].update(distortion_params=[0, "0"]),
+     r"frame 'images/00002_frame_2.png': 'distortion_params' must be a list of finite numbers"),
+    (lambda m: m["frames"][2].update(distortion_params=0.0),
+     r"'distortion_params' must be a list of finite numbers, got 0.0"),
+    (lambda m: m.update(k1="abc"), r"'k1' must be a finite number, got 'abc'"),
+    # Masks: the loss has none, so mask_path is refused (a missing mask file alike, named).
+    (lambda m: m["frames"][1].update(mask_path="masks/00001.png"),
+     r"frame 'images/00001_frame_1.png': 'mask_path' = 'masks/00001.png': masks are not "
+     r"supported"),
+    (lambda m: m.update(mask_path="masks/all.png"), r"\(top level\): 'mask_path' = "
+     r"'masks/all.png': masks are not supported"),
+    # Intrinsics no photograph has, named with the frame and the key.
+    (lambda m: m.update(cx=-100.0), r"frame 'images/00000_frame_0.png': 'cx' = -100 lies "
+     r"outside the image \(0 .. 32 pixels\)"),
+    (lambda m: m.update(cy=24.5), r"'cy' = 24.5 lies outside the image \(0 .. 24 pixels\)"),
+    (lambda m: m.update(fl_x=1e6), r"'fl_x' gives a focal length of 1e\+06 pixels, over 1000 x "
+     r"the image width"),
+    (lambda m: m.update(fl_y=0.0), r"focal lengths must be > 0, got fl_x=.*, fl_y=0.0"),
+    (lambda m: m.update(fl_x=-20.0), r"focal lengths must be > 0"),
+    (lambda m: m.update(fl_x=0.9, fl_y=1.2, cx=0.5, cy=0.5),  # normalised by the image size
+     r"'fl_x' gives a focal length of 0.9 pixels, under 0.05 x the image width .* normalised"),
+    (lambda m: m.update(w=0), r"the image size w=0, h=24 must be at least 1 pixel"),
+    (lambda m: m.update(ply_file_path=3), r"'ply_file_path' must be a non-empty string, got 3"),
+    (lambda m: m["frames"][0].update(file_path=""), r"frames\[0\] needs a non-empty 'file_path'"),
+])
+def test_every_frame_field_is_read_or_refused(tmp_path, change, message):
+  root = _capture(tmp_path)
+  _edit(root, change)
+  with pytest.raises(DatasetError, match=message):
+    load_nerfstudio(root)
+
+
+@pytest.mark.parametrize("change", [
+    lambda m: m.update(camera_model="OPENCV", distortion_params=[0.0] * 6),
+    lambda m: (m.pop("camera_model"), [f.update(camera_model="PINHOLE") for f in m["frames"]]),
+    lambda m: m["frames"][0].update(distortion_params=[], k3=0.0, camera_model="PINHOLE"),
+    lambda m: m.update(cx=0.0, cy=24.0),  # the principal point on the image's border
+])
+def test_pinhole_fields_in_any_place_are_read(tmp_path, change):
+  views = _views(same_intrinsics=True)
+  export_nerfstudio(tmp_path, views)
+  meta = json.loads((tmp_path / "transforms.json").read_text())
+  _edit(tmp_path, change)
+  back, _ = load_nerfstudio(tmp_path)
+  cx = json.loads((tmp_path / "transforms.json").read_text())["cx"]
+  np.testing.assert_array_equal(back.cameras.cx, np.float32(cx))
+  np.testing.assert_array_equal(back.cameras.fx, np.float32(meta["fl_x"]))
+
+
+def test_sub_folders_are_kept_in_images_n(tmp_path):
+  """`images/cam0/0001.png` reads `images_2/cam0/0001.png` at factor 2 (not
+  `images_2/0001.png`); without that copy the frame is refused, naming the file looked for."""
+  root = _capture(tmp_path)
+  meta = json.loads((root / "transforms.json").read_text())
+  frame = meta["frames"][0]
+  frames = []
+  for cam, value in (("cam0", 30), ("cam1", 90)):
+    _write_png(root / "images" / cam / "0001.png", value)
+    _write_png(root / "images_2" / cam / "0001.png", value + 1, size=(12, 16))
+    frames.append({**frame, "file_path": f"images/{cam}/0001.png"})
+  _edit(root, lambda m: m.update(frames=frames))
+  full, _ = load_nerfstudio(root)
+  half, _ = load_nerfstudio(root, factor=2)
+  assert full.names == half.names == ("cam0/0001", "cam1/0001")
+  np.testing.assert_allclose(half.images[:, 0, 0, 0] * 255, [31, 91], atol=1e-4)
+  np.testing.assert_allclose(half.cameras.fx, full.cameras.fx / 2)
+
+  (root / "images_2" / "cam1" / "0001.png").rename(root / "images_2" / "0001.png")
+  with pytest.raises(FileNotFoundError, match=r"images_2/cam1/0001.png"):
+    load_nerfstudio(root, factor=2)
+  # Frames outside images/ read images_N/<file name> (nerfstudio's rule): two frames of one
+  # file name would read one copy, and are refused.
+  for cam in ("cam0", "cam1"):
+    _write_png(root / cam / "0001.png", 5)
+  _edit(root, lambda m: m.update(frames=[{**frame, "file_path": f"{cam}/0001.png"}
+                                         for cam in ("cam0", "cam1")]))
+  assert load_nerfstudio(root)[0].names == ("cam0/0001", "cam1/0001")
+  with pytest.raises(DatasetError, match=r"frames\[0\] \('cam0/0001.png'\) and frames\[1\] "
+                                         r"\('cam1/0001.png'\) have the image .*images_2/0001"):
+    load_nerfstudio(root, factor=2)
+
+
+@pytest.mark.parametrize("pixels, message", [
+    (np.full((24, 32), np.nan, np.float32), r"x.tif: 768 pixel values are NaN or infinite"),
+    (np.where(np.eye(24, 32) > 0, np.inf, 0.5).astype(np.float32), r"24 pixel values are NaN"),
+    (np.full((24, 32), 128.0, np.float32), r"x.tif: float pixel values span 128 .. 128; a float "
+                                           r"image must hold values in \[0, 1\]"),
+    (np.full((24, 32), -0.25, np.float32), r"span -0.25 .. -0.25"),
+])
+def test_float_images_out_of_range_are_refused_naming_the_file(tmp_path, pixels, message):
+  from PIL import Image
+
+  root = _capture(tmp_path)
+  Image.fromarray(np.full((24, 32), 0.25, np.float32), mode="F").save(root / "x.tif")
+  _edit(root, lambda m: m["frames"][0].update(file_path="x.tif"))
+  views, _ = load_nerfstudio(root)  # a float TIFF in [0, 1] is read as stored
+  np.testing.assert_array_equal(views.images[views.names.index("x")], 0.25)
+  Image.fromarray(pixels, mode="F").save(root / "x.tif")
+  with pytest.raises(DatasetError, match=message):
+    load_nerfstudio(root)

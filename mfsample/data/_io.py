@@ -76,10 +76,12 @@ def read_image(path):
 
   Returns:
     ([H, W, 3] colour, [H, W] alpha or None when the file has no alpha channel). The colour is
-    the stored (straight, not premultiplied) colour.
+    the stored (straight, not premultiplied) colour. Float images (a 32-bit float TIFF) are
+    read as stored.
 
   Raises:
-    DatasetError: the file is not a readable image of those kinds (naming the file).
+    DatasetError: the file is not a readable image of those kinds, or holds float values that
+      are not finite or outside [0, 1] (naming the file).
   """
   path = require_file(path, "image")
   try:
@@ -100,6 +102,14 @@ def read_image(path):
     img = data.astype(np.float32)
   elif np.issubdtype(data.dtype, np.floating):
     img = data.astype(np.float32)
+    # Float pixels (a TIFF of mode F) are used as stored: they must already be in [0, 1].
+    if not np.all(np.isfinite(img)):
+      raise DatasetError(f"{path}: {np.count_nonzero(~np.isfinite(img))} pixel values are NaN "
+                         "or infinite; images must hold finite values.")
+    if img.size and (img.min() < 0.0 or img.max() > 1.0):
+      raise DatasetError(f"{path}: float pixel values span {img.min():g} .. {img.max():g}; a "
+                         "float image must hold values in [0, 1] (8-bit values stored as "
+                         "floats would be read as white).")
   else:
     raise DatasetError(f"{path}: unsupported pixel type {data.dtype}.")
   if img.ndim == 2:
@@ -240,7 +250,7 @@ def validate_rigid(matrix, where, field="pose"):
     m = np.asarray(matrix, dtype=np.float64)
   except (TypeError, ValueError):
     raise DatasetError(f"{where}: {field} must be a 3x4 or 4x4 matrix of numbers, got "
-                       f"{_short(matrix)}.") from None
+                       f"{short(matrix)}.") from None
   if m.shape not in ((3, 4), (4, 4)):
     raise DatasetError(f"{where}: {field} must be a 3x4 or 4x4 matrix, got shape {m.shape}.")
   if not np.all(np.isfinite(m)):
@@ -269,11 +279,12 @@ def number(mapping, key, where, *, integer=False):
   ok = ok and np.isfinite(value) and (not integer or float(value).is_integer())
   if not ok:
     kind = "an integer" if integer else "a finite number"
-    raise DatasetError(f"{where}: '{key}' must be {kind}, got {_short(value)}.")
+    raise DatasetError(f"{where}: '{key}' must be {kind}, got {short(value)}.")
   return int(value) if integer else float(value)
 
 
-def _short(value, limit=60):
+def short(value, limit=60):
+  """repr(value), cut to `limit` characters (for messages)."""
   text = repr(value)
   return text if len(text) <= limit else text[:limit] + "..."
 

@@ -512,17 +512,44 @@ FILE_KINDS = tuple(name for name, kind in DATA_KINDS.items() if kind.files)
 # ------------------------------------------------------------------------- helpers
 
 
+# Camera centres whose spread is at most this fraction of their distance from the origin are
+# one point (one camera, a tripod turning about one point, float32 round-off of the poses,
+# ~1e-7 of that distance): their spread measures nothing about the scene.
+COINCIDENT_SPREAD = 1e-3
+
+
 def scene_extent(cameras: Camera):
-  """3DGS scene extent: 1.1 x the largest distance of a camera centre from their mean.
+  """The scene extent of 3DGS: 1.1 x the largest distance of a camera centre from their mean.
 
   Scales the position learning rate, B_hat of the centres, and densification thresholds.
-  With one camera (or coincident ones) it falls back to 1.1 x the distance to the origin.
+
+  A layout with no spread to measure (one camera, cameras turning about one point: a spread
+  at most `COINCIDENT_SPREAD` of the distance of their mean centre from the origin) falls back
+  to 1.1 x that distance, the distance to the world's origin being then the only length the
+  cameras give.
+
+  Args:
+    cameras: `Camera` batched over [V] (or one camera).
+
+  Returns:
+    the extent (float, world units), > 0.
+
+  Raises:
+    ValueError: the camera centres all lie at the origin (no spread, no distance): the
+      extent must then be given.
   """
-  centers = np.asarray(cameras.center).reshape(-1, 3)
-  radius = np.max(np.linalg.norm(centers - centers.mean(0), axis=-1))
-  if radius < 1e-6:
-    radius = float(np.max(np.linalg.norm(centers, axis=-1)))
-  return 1.1 * max(float(radius), 1e-3)
+  centers = np.asarray(cameras.center, np.float64).reshape(-1, 3)
+  mean = centers.mean(0)
+  radius = float(np.max(np.linalg.norm(centers - mean, axis=-1)))
+  distance = float(np.linalg.norm(mean))
+  if radius <= COINCIDENT_SPREAD * distance:
+    radius = distance
+  if not radius > 0.0:
+    raise ValueError(f"scene_extent: the {len(centers)} camera centres all lie at the origin, "
+                     "so neither their spread nor their distance measures the scene; give the "
+                     "extent (`extent=`; `config.data.extent` in a training config, "
+                     "`config.model.extent` in a lighting one).")
+  return 1.1 * radius
 
 
 def to_device(views: Views):

@@ -29,14 +29,26 @@ them (`nerfstudio/data/dataparsers/nerfstudio_dataparser.py`):
   `applied_transform`, giving the coordinates of the reconstruction it came from: the cameras
   of `load_colmap(scene/colmap)` and of a 3DGS model trained on that COLMAP model.
 * Frames are ordered by file path (as nerfstudio orders them) and named by the file's path
-  under `images/` without its extension. `images_{N}/` holds the same file names; the
-  intrinsics are scaled to the size of the images found there (as `load_colmap` does).
+  relative to the capture folder without its extension, less the leading `images/` when
+  every frame lies in that folder (`images/cam0/0001.png` -> `cam0/0001`). Two frames of one
+  image file (a frame listed twice, `images/a.png` and `./images/a.png`) or of one name
+  (`a.png` and `a.jpg`) are refused, naming both frames.
+* `images_{N}/` holds the same files: `images/cam0/0001.png` is read from
+  `images_N/cam0/0001.png` (a frame outside `images/` from `images_N/` + its file name,
+  nerfstudio's rule; two frames reaching one file are refused). The intrinsics are scaled to
+  the size of the images found there (as `load_colmap` does).
 * Only pinhole cameras render correctly with a pinhole renderer: `PINHOLE`,
   `SIMPLE_PINHOLE`, and `OPENCV`, `SIMPLE_RADIAL`, `RADIAL`, `FULL_OPENCV` (or no
-  `camera_model`, nerfstudio's perspective default) whose distortion is all zero. Anything
-  else (a fisheye, an equirectangular camera, non-zero distortion) is refused naming the model
-  and the frame: process the capture with `ns-process-data ... --camera-type pinhole`, which
-  has COLMAP solve for distortion-free cameras.
+  `camera_model`, nerfstudio's perspective default) whose distortion (`k1`..`k6`, `p1`, `p2`,
+  `distortion_params`) is all zero, at the top level and in every frame. Anything else (a
+  fisheye, an equirectangular camera, non-zero distortion) is refused naming the model and the
+  frame: process the capture with `ns-process-data ... --camera-type pinhole`, which has
+  COLMAP solve for distortion-free cameras.
+* Intrinsics no photograph has are refused naming the frame and the key
+  (`transforms_json.check_pinhole`): focal lengths <= 0, under 0.05 or over 1000 times the
+  image size (values normalised by the image size, say), a principal point outside the image.
+* `mask_path` is refused: the training loss has no per-pixel mask, so the masked pixels would
+  be fitted as they are. `depth_file_path` is not read (nothing here uses depth).
 * nerfstudio's trainers then re-centre, orient and scale the cameras for their own use
   (`dataparser_transforms.json` in their output folder); that is not part of the capture, and a
   model exported by `ns-export gaussian-splat` lives in that frame, not in this one.
@@ -44,12 +56,13 @@ them (`nerfstudio/data/dataparsers/nerfstudio_dataparser.py`):
 `export_nerfstudio` writes `Views` (and points) in this layout, for nerfstudio and for tests.
 """
 
+import os
 from pathlib import Path
 
 import numpy as np
 
 from mfsample.camera import Camera
-from mfsample.data import _io
+from mfsample.data import _io, transforms_json
 from mfsample.data.colmap import PointCloud
 from mfsample.data.views import Views
 
@@ -88,9 +101,11 @@ def load_nerfstudio(path, *, factor=1, frame="transforms", background=(1.0, 1.0,
 
   Raises:
     FileNotFoundError: a missing folder, json, image or point file (named in the message).
-    DatasetError (a ValueError): malformed json, a missing or contradictory key (named with
-      its frame), a distorted or non-perspective camera, a non-rigid pose, images of different
-      sizes or not a scaled copy of their frame's `w` x `h`.
+    DatasetError (a ValueError): malformed json, a missing, malformed or contradictory key
+      (named with its frame), a distorted or non-perspective camera, implausible intrinsics,
+      `mask_path`, a non-rigid pose, two frames of one image or one name, images of different
+      sizes or not a scaled copy of their frame's `w` x `h`, float images with values that are
+      not finite or outside [0, 1].
   """
   path = Path(path)
   json_path = path if path.suffix == ".json" else path / "transforms.json"
@@ -112,18 +127,31 @@ def load_nerfstudio(path, *, factor=1, frame="transforms", background=(1.0, 1.0,
   applied = applied_transform(meta, json_path)
   to_original = np.linalg.inv(applied) if frame == "original" else np.eye(4)
 
-  frames = []
+  order = []  # (file path, index in the json) of every frame
   for i, entry in enumerate(meta["frames"]):
-    if not isinstance(entry, dict) or not isinstance(entry.get("file_path"), str):
-      raise _io.DatasetError(f"{json_path}: frames[{i}] needs a 'file_path' string.")
-    frames.append(entry)
-  frames.sort(key=lambda f: str(Path(f["file_path"])))
-  images, alphas, w2cs, ks, names = [], [], [], [], []
+    if not isinstance(entry, dict) or not isinstance(entry.get("file_path"), str) or not (
+        entry["file_path"]):
+      raise _io.DatasetError(f"{json_path}: frames[{i}] needs a non-empty 'file_path' string.")
+    order.append((str(Path(entry["file_path"])), i))
+  order.sort()
+  frames = [meta["frames"][i] for _, i in order]
+  names = _frame_names(root, [f["file_path"] for f in frames])
+  images, alphas, w2cs, ks = [], [], [], []
   size = None
-  for entry in frames:
+  seen = {}  # image file or view name -> (index in the json, file_path) of its first frame
+  for (_, index), entry, name in zip(order, frames, names, strict=True):
     where = f"{json_path}: frame {entry['file_path']!r}"
     (fx, fy, cx, cy), (cam_w, cam_h) = _pinhole(meta, entry, where)
     file = _frame_image(root, entry["file_path"], factor)
+    for key, what in (((root / entry["file_path"]).resolve(), "the image"),
+                      (file.resolve(), "the image"), (("name", name), "the view name")):
+      shown = repr(name) if what == "the view name" else key
+      if key in seen and seen[key][0] != index:
+        raise _io.DatasetError(
+            f"{json_path}: frames[{seen[key][0]}] ({seen[key][1]!r}) and frames[{index}] "
+            f"({entry['file_path']!r}) have {what} {shown}; every frame must be a distinct "
+            "view (a frame listed twice would be both trained on and held out).")
+      seen[key] = (index, entry["file_path"])
     color, alpha = _io.read_image(file)
     size = color.shape[:2] if size is None else size
     sx, sy = _io.image_scale(file, color.shape[:2], size, (cam_w, cam_h), "the first frame's",
@@ -139,7 +167,6 @@ def load_nerfstudio(path, *, factor=1, frame="transforms", background=(1.0, 1.0,
     images.append(color)
     alphas.append(alpha)
     ks.append((fx * sx, fy * sy, cx * sx, cy * sy))
-    names.append(_frame_name(entry["file_path"]))
 
   alpha_arr = None
   if any(a is not None for a in alphas):
@@ -150,8 +177,11 @@ def load_nerfstudio(path, *, factor=1, frame="transforms", background=(1.0, 1.0,
   views = Views(images=np.clip(np.stack(images), 0.0, 1.0).astype(np.float32), cameras=cameras,
                 alphas=alpha_arr, names=tuple(names))
   points = PointCloud(np.zeros((0, 3), np.float32), np.zeros((0, 3), np.float32))
-  if meta.get("ply_file_path"):
-    points = read_points(root / str(meta["ply_file_path"]))
+  if meta.get("ply_file_path") is not None:
+    if not isinstance(meta["ply_file_path"], str) or not meta["ply_file_path"]:
+      raise _io.DatasetError(f"{json_path}: 'ply_file_path' must be a non-empty string, got "
+                             f"{_io.short(meta['ply_file_path'])}.")
+    points = read_points(root / meta["ply_file_path"])
     if frame == "original":
       xyz = np.asarray(points.xyz, np.float64) @ to_original[:3, :3].T + to_original[:3, 3]
       points = PointCloud(xyz.astype(np.float32), points.rgb)
@@ -165,44 +195,71 @@ def applied_transform(meta, where="transforms.json"):
   return _io.validate_rigid(meta["applied_transform"], where, "'applied_transform'")
 
 
-def _value(meta, entry, key, where, default=None):
-  """A per-camera key: the top level's, else the frame's; refused when they disagree."""
+def _raw(meta, entry, key, where):
+  """A per-camera key as stored: the top level's, else the frame's (None when neither has it);
+  refused when both have it and they disagree."""
   top, own = meta.get(key), entry.get(key)
   if top is not None and own is not None and top != own:
     raise _io.DatasetError(f"{where} has {key} = {own!r} but the top level says {top!r}; "
                            "nerfstudio uses the top level's: keep one of them.")
-  if top is None and own is None:
+  return top if top is not None else own
+
+
+def _value(meta, entry, key, where, default=None):
+  """A per-camera number: the top level's, else the frame's; refused when they disagree."""
+  if _raw(meta, entry, key, where) is None:
     if default is not None:
       return default
     raise _io.DatasetError(f"{where}: '{key}' is neither in the frame nor at the top level.")
-  return _io.number(meta if top is not None else entry, key, where,
+  return _io.number(meta if meta.get(key) is not None else entry, key, where,
                     integer=key in _SIZE)
 
 
 def _pinhole(meta, entry, where):
-  """((fx, fy, cx, cy), (w, h)) of a frame's camera; DatasetError for a distorted one."""
-  model = meta.get("camera_model", "OPENCV")
-  if model not in _PERSPECTIVE:
-    raise _io.DatasetError(f"{where} has the camera model {model!r}, which the pinhole "
-                           f"renderer cannot reproduce; {_HINT}.")
+  """((fx, fy, cx, cy), (w, h)) of a frame's camera; DatasetError for a distorted or
+  non-perspective one (top-level or per-frame keys alike), implausible intrinsics or masks."""
+  for model in (meta.get("camera_model"), entry.get("camera_model")):
+    if model is not None and not isinstance(model, str):
+      raise _io.DatasetError(f"{where}: 'camera_model' must be a string, got "
+                             f"{_io.short(model)}.")
+    if model is not None and model not in _PERSPECTIVE:
+      raise _io.DatasetError(f"{where} has the camera model {model!r}, which the pinhole "
+                             f"renderer cannot reproduce; {_HINT}.")
+  model = _raw(meta, entry, "camera_model", where) or "OPENCV"
   distortion = {k: _value(meta, entry, k, where, default=0.0) for k in _DISTORTION}
-  listed = meta.get("distortion_params", entry.get("distortion_params"))
-  if listed is not None and any(v != 0 for v in np.ravel(np.asarray(listed, np.float64))):
-    distortion["distortion_params"] = listed
+  for scope, mapping in (("", entry), (" (top level)", meta)):
+    listed = transforms_json.distortion_list(mapping.get("distortion_params"), where + scope)
+    if any(listed):
+      distortion["distortion_params" + scope] = listed
   bad = {k: v for k, v in distortion.items() if np.any(np.asarray(v) != 0)}
   if bad:
     raise _io.DatasetError(f"{where} has the camera model {model!r} with distortion {bad}; "
                            f"{_HINT}.")
+  transforms_json.refuse_masks(entry, where)
+  transforms_json.refuse_masks(meta, f"{where} (top level)")
   fx, fy, cx, cy = (_value(meta, entry, k, where) for k in _INTRINSICS)
   w, h = (_value(meta, entry, k, where) for k in _SIZE)
-  if fx <= 0 or fy <= 0 or w < 1 or h < 1:
-    raise _io.DatasetError(f"{where}: invalid intrinsics fl_x={fx}, fl_y={fy}, w={w}, h={h}.")
+  if w < 1 or h < 1:
+    raise _io.DatasetError(f"{where}: the image size w={w}, h={h} must be at least 1 pixel.")
+  transforms_json.check_pinhole(where, w, h, fx, fy, cx, cy)
   return (fx, fy, cx, cy), (w, h)
 
 
+def _relative_parts(root, file_path):
+  """The parts of a frame's `file_path` under the capture folder, normalised (`./`, `a/../`
+  removed); an absolute path outside the folder stays absolute."""
+  path = Path(os.path.normpath(root / file_path))
+  try:
+    return path.relative_to(Path(os.path.normpath(root))).parts
+  except ValueError:
+    return path.parts
+
+
 def _frame_image(root, file_path, factor):
-  """The image file of a frame: `file_path` under the capture, or for factor N the same file
-  name in `images_N/` (nerfstudio's rule), with another image extension if need be."""
+  """The image file of a frame: `file_path` under the capture, or for factor N its copy in
+  `images_N/`: the path under `images/` kept (`images/cam0/1.png` -> `images_N/cam0/1.png`),
+  the file name alone for a frame outside `images/` (nerfstudio's rule); with another image
+  extension if need be."""
   file = root / file_path
   if factor > 1:
     folder = root / f"images_{int(factor)}"
@@ -210,7 +267,9 @@ def _frame_image(root, file_path, factor):
       found = sorted(p.name for p in root.glob("images*") if p.is_dir())
       raise FileNotFoundError(f"image folder for factor={factor} not found: {folder} (image "
                               f"folders in {root}: {', '.join(found) or 'none'}).")
-    file = folder / Path(file_path).name
+    parts = _relative_parts(root, file_path)
+    file = folder.joinpath(*(parts[1:] if len(parts) > 1 and parts[0] == "images"
+                             else parts[-1:]))
   if file.is_file():
     return file
   # Downscaled copies are often written as PNG whatever the originals are.
@@ -221,13 +280,13 @@ def _frame_image(root, file_path, factor):
                           "with another image extension).")
 
 
-def _frame_name(file_path):
-  """The view name of a frame: its path under images/ (or as given) without the extension."""
-  parts = Path(file_path).with_suffix("").parts
-  parts = [p for p in parts if p not in (".", "")]
-  if len(parts) > 1 and parts[0] == "images":
-    parts = parts[1:]
-  return "/".join(parts)
+def _frame_names(root, file_paths):
+  """The view names of frames: each `file_path` relative to the capture without its extension,
+  less the leading `images/` when every frame lies in that folder (COLMAP's image names)."""
+  parts = [list(_relative_parts(root, f)) for f in file_paths]
+  if all(len(p) > 1 and p[0] == "images" for p in parts):
+    parts = [p[1:] for p in parts]
+  return [Path(*p).with_suffix("").as_posix() for p in parts]
 
 
 def read_points(path):
