@@ -1,5 +1,7 @@
 """The `mfsample` command of an installed package: every job and the viewer.
 
+For example::
+
   mfsample train --config=tiny --workdir=workdirs/tiny
   mfsample camera-planning --workdir=workdirs/camera_planning --config=lego,rounds2000
   mfsample next-views --config=colmap,posthoc --workdir=workdirs/garden \\

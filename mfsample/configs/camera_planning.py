@@ -5,7 +5,7 @@
 Without a variant this is the main job: every strategy of the paper's Table 1 on the
 built-in Mitsuba scene, one seed, about 20 minutes on two CPU cores (the defaults and a
 comment on every field: `mfsample.planning.config`). Variants combine, comma-separated,
-e.g. `--config=lego,rounds2000` (`--config=configs/camera_planning.py:lego,rounds2000`):
+e.g. `--config=lego,rounds2000` (`--config=configs/camera_planning.py:lego,rounds2000`)::
 
   lego             NeRF Synthetic lego at 80 x 80: candidates = its 100 training views,
                    test = every 4th test view; selection strategies only (no oracle).

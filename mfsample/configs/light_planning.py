@@ -4,7 +4,7 @@
 
 Without a variant: every light strategy on the built-in Mitsuba scene, one seed, in about 20
 minutes on two CPU cores (the defaults and a comment on every field:
-`mfsample.lighting.config`). Variants:
+`mfsample.lighting.config`). Variants::
 
   tiny   seconds-long: a synthetic diffuse shell of random Gaussians at 24 x 24, 3 lights.
 

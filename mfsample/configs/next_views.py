@@ -4,7 +4,7 @@
 
 Variants combine, comma-separated (the defaults and a comment on every field:
 `mfsample.your_data.config`), e.g. `--config=colmap,posthoc`
-(`--config=configs/next_views.py:colmap,posthoc`):
+(`--config=configs/next_views.py:colmap,posthoc`)::
 
   (none)   the built-in Mitsuba scene at 64 x 64: a field trained on every 4th of its 100
            candidate views (2000 steps), the other 75 ranked by U; about 5 minutes of CPU

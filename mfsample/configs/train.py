@@ -2,7 +2,7 @@
 
 (From a clone: `python experiments/train.py --config=configs/train.py:VARIANT`.)
 
-Variants (the defaults and a comment on every field: `mfsample.train.config`):
+Variants (the defaults and a comment on every field: `mfsample.train.config`)::
 
   (none)  the built-in Mitsuba scene at 128 x 128, 7000 steps with densification.
   lego    NeRF Synthetic lego at 200 x 200 on white, all 100 training views, 5000 steps.

@@ -5,7 +5,7 @@
 
 Without a variant: the AUSE benchmark (the paper's Table 5) on the three built-in scenes,
 64 x 64, one seed; the defaults and a comment on every field: `mfsample.quality.config`.
-Variants combine, comma-separated:
+Variants combine, comma-separated::
 
   candidates  U against the round model's error at the planning candidates instead (the
               main job's pool; round lengths 150, 400, 600; M = 2 and 8; seeds 0 and 1).

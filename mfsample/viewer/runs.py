@@ -9,7 +9,7 @@ Three jobs answer "where next?":
 | `light_planning`  | `experiments/light_planning.py`   | one light chosen by one strategy       |
 
 The kind is the job that `config.json` records having written the workdir (`_written_by`,
-`mfsample.config_record.WRITTEN_BY`). A `Run` lists its `Step`s from
+`mfsample.config_record.WRITTEN_BY`). A `Run` lists its steps (`Step`) from
 the files the job writes (re-read on every call, so the rounds, lights and proposals of a
 running job appear as they are written); a file that is missing, partial or being replaced
 is skipped until a later call. Cameras and ground-truth images come from the job's own
@@ -175,7 +175,7 @@ def _kinds_sentence():
 
 
 class Run:
-  """A workdir of one kind: its `Step`s, its inputs and its models.
+  """A workdir of one kind: its steps (`Step`), its inputs and its models.
 
   Attributes:
     kind: a key of `KINDS`.
@@ -224,7 +224,7 @@ class Run:
     raise NotImplementedError
 
   def steps(self):
-    """The run's `Step`s in the order the job made them (re-read from the files)."""
+    """The run's steps (`Step`) in the order the job made them (re-read from the files)."""
     raise NotImplementedError
 
   def model(self, step):
