@@ -132,6 +132,12 @@ def command_help(name: str):
       "--helpfull lists every flag."])
 
 
+def _usage_error(message):
+  """Ends the command as the jobs end on a user's error: one line, exit code 2."""
+  print(message, file=sys.stderr)
+  sys.exit(2)
+
+
 def main(argv=None):
   """The `mfsample` console script (and `python -m mfsample`)."""
   argv = list(sys.argv if argv is None else argv)
@@ -140,8 +146,8 @@ def main(argv=None):
     return
   name, args = argv[1], argv[2:]
   if name not in COMMANDS:
-    sys.exit(f"mfsample: unknown command {name!r}; commands: {', '.join(COMMANDS)} "
-             "(mfsample --help)")
+    _usage_error(f"mfsample: unknown command {name!r}; commands: {', '.join(COMMANDS)} "
+                 "(mfsample --help)")
   if any(arg in HELP for arg in args):
     print(command_help(name))
     return
@@ -153,7 +159,7 @@ def main(argv=None):
   try:
     sys.argv = job_argv(name, args)
   except UsageError as e:
-    sys.exit(str(e))
+    _usage_error(str(e))
   from mfsample import jobs
 
   jobs.main(importlib.import_module(command.job).JOB)

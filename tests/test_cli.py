@@ -5,6 +5,8 @@ import importlib
 import json
 import os
 import pathlib
+import re
+import shlex
 import shutil
 import subprocess
 import sys
@@ -91,12 +93,16 @@ def test_config_values_resolve_to_the_packaged_file_or_stay_a_path():
 
 
 def test_unknown_commands_and_variants_are_one_line(capsys):
-  with pytest.raises(SystemExit, match=r"unknown command 'trian'; commands: train, "):
-    cli.main(["mfsample", "trian"])
-  with pytest.raises(SystemExit, match=r"mfsample camera-planning: --config: unknown variant "
-                     r"'legoo'; known: lego, rounds2000, .*tiny"):
-    cli.main(["mfsample", "camera-planning", "--config=lego,legoo", "--workdir=w"])
-  assert capsys.readouterr().out == ""
+  for argv, message in (
+      (["trian"], r"^mfsample: unknown command 'trian'; commands: train, camera-planning, "),
+      (["camera-planning", "--config=lego,legoo", "--workdir=w"],
+       r"^mfsample camera-planning: --config: unknown variant 'legoo'; known: lego, "
+       r"rounds2000, .*tiny")):
+    with pytest.raises(SystemExit) as exit_:
+      cli.main(["mfsample", *argv])
+    assert exit_.value.code == 2  # as a job's config, data and workdir errors
+    out = capsys.readouterr()
+    assert out.out == "" and out.err.count("\n") == 1 and re.match(message, out.err), out
 
 
 def test_help_lists_the_commands_and_each_job_its_variants(capsys):
@@ -111,6 +117,34 @@ def test_help_lists_the_commands_and_each_job_its_variants(capsys):
     if cli.COMMANDS[name].config:
       for variant in cli.config_module(cli.COMMANDS[name]).VARIANTS:
         assert f"\n  {variant} " in text, (name, variant)
+
+
+def _documented_commands():
+  """(page, command name, arguments) of every `mfsample COMMAND ...` in a bash block or an
+  inline code span of README.md and docs/*.md."""
+  found = []
+  for page in [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]:
+    text = page.read_text()
+    code = [block.replace("\\\n", " ") for block in
+            re.findall(r"```bash\n(.*?)```", text, flags=re.S)]
+    code += re.findall(r"(?<!`)`([^`\n]+)`(?!`)", text)
+    for snippet in code:
+      for line in snippet.splitlines():
+        for match in re.finditer(r"(?:^|[\s;&|(])mfsample ([a-z][\w-]*)((?: +[^\s#]+)*)", line):
+          found.append((page.name, match.group(1), shlex.split(match.group(2))))
+  return found
+
+
+def test_documented_commands_name_commands_variants_and_fields_that_exist():
+  documented = _documented_commands()
+  assert {name for _, name, _ in documented} >= {"train", "camera-planning", "viewer"}
+  for page, name, args in documented:
+    assert name in cli.COMMANDS, (page, name)
+    if not cli.COMMANDS[name].config:
+      continue
+    args = [a for a in args if a.startswith(("--config", "--workdir"))]
+    config = _load(cli.job_argv(name, args))  # variants, files and overrides as typed
+    assert config is not None, (page, name, args)
 
 
 def _run(cmd, **kwargs):
