@@ -1,12 +1,8 @@
-"""Active illumination planning: `experiments/light_planning.py --config=configs/light_planning.py`.
+"""The config file of `experiments/light_planning.py`, shipped in the package.
 
-Without a variant: every light strategy on the built-in Mitsuba scene, one seed, in about 20
-minutes on two CPU cores (the defaults and a comment on every field:
-`mfsample.lighting.config`). Variants:
-
-  tiny   seconds-long: a synthetic diffuse shell of random Gaussians at 24 x 24, 3 lights.
-
-Any field is an override, e.g. `--config.steps_per_light=1000 --config.num_lights=6`.
+`mfsample/configs/light_planning.py` lists the variants
+(`--config=configs/light_planning.py:VARIANTS`); the installed command
+`mfsample light-planning` loads that file.
 """
 
-from mfsample.lighting.config import VARIANTS, get_config  # noqa: F401 (the variants live there)
+from mfsample.configs.light_planning import VARIANTS, get_config  # noqa: F401

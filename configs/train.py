@@ -1,13 +1,8 @@
-"""Training a stochastic Gaussian field: `experiments/train.py --config=configs/train.py:VARIANT`.
+"""The config file of `experiments/train.py`, shipped in the package.
 
-Variants (the defaults and a comment on every field: `mfsample.train.config`):
-
-  (none)  the built-in Mitsuba scene at 128 x 128, 7000 steps with densification.
-  lego    NeRF Synthetic lego at 200 x 200 on white, all 100 training views, 5000 steps.
-          Point `--config.data.path` at the scene folder (default data/nerf_synthetic/lego).
-  tiny    seconds-long: random ground-truth Gaussians at 32 x 32, 40 steps (tests, smoke runs).
-
-Any field is overridden on the command line, e.g. `--config.sampler.rank=4`.
+`mfsample/configs/train.py` lists the variants
+(`--config=configs/train.py:VARIANTS`); the installed command
+`mfsample train` loads that file.
 """
 
-from mfsample.train.config import VARIANTS, get_config  # noqa: F401 (the variants live there)
+from mfsample.configs.train import VARIANTS, get_config  # noqa: F401

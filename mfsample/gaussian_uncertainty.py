@@ -81,7 +81,7 @@ def view_share(model, camera: Camera, z, background, *, settings: RenderSettings
   Args:
     model: `mfsample.model.Model`.
     camera: one unbatched `Camera`.
-    z: [M, *samplers.z_shape(model)] samples.
+    z: `[M, *samplers.z_shape(model)]` samples.
     background: [3] colour behind the samples (the one the model was trained on).
     settings: `RenderSettings` (static).
 
@@ -130,7 +130,7 @@ def gaussian_uncertainty(model, cameras: Camera, z, *, settings: RenderSettings,
     model: `mfsample.model.Model` (any sampler; a deterministic one has share 0).
     cameras: `Camera`, one or batched over [V]; the views the shares are summed over (e.g.
       the training views, or the candidates of the next views).
-    z: [M, *samplers.z_shape(model)] samples of theta (`mfsample.samplers.sample_z`).
+    z: `[M, *samplers.z_shape(model)]` samples of theta (`mfsample.samplers.sample_z`).
     settings: `RenderSettings` to start from; the intersection budget is grown on overflow
       (`render_with_budget`), never truncated.
     background: [3] colour behind the sample renders (default black), as for U.

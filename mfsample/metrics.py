@@ -296,7 +296,7 @@ def ause(uncertainty, error, mask=None, *, measure="mae", normalize="max"):
 
   Args:
     uncertainty: [H, W] (any shape) predicted uncertainty, finite; only its order matters.
-    error: same shape, the true absolute errors (>= 0, finite), e.g. |depth - true depth|.
+    error: same shape, the true absolute errors (>= 0, finite), e.g. `|depth - true depth|`.
     mask: optional same-shape bool: the pixels to count (at least one).
     measure: "mae" (the paper's Table 5) or "rmse".
     normalize: "max" (the standard) or "start" (see above).

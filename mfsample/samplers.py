@@ -251,7 +251,7 @@ class SamplerSpec:
 
 
 def b_hat_magnitude(raw):
-  """|B_hat| = relu(raw), per group: the one activation of B_hat's entries.
+  """`|B_hat| = relu(raw)`, per group: the one activation of B_hat's entries.
 
   The relu takes gradient 1 at raw = 0 (`x >= 0`, not `x > 0`): the clamp after each
   optimiser step parks entries at exactly 0, and the volume term must be able to lift them
@@ -357,7 +357,7 @@ def sobol_z(num, dim, seed, offset=0):
 
 def sample_z(model: "mfsample.model.Model", num_samples: int, *,  # noqa: F821
              seed: int = 0) -> jax.Array:
-  """z [M, *z_shape(model)] of M = `num_samples` samples: the one way to draw the z of U.
+  """z `[M, *z_shape(model)]` of M = `num_samples` samples: the one way to draw the z of U.
 
   The first M points of the scrambled Sobol sequence of `seed` where the spec's z source is
   Sobol (the low-rank sampler; paper Sec. 4.4: the first two are nearly antithetic), else M
@@ -370,7 +370,7 @@ def sample_z(model: "mfsample.model.Model", num_samples: int, *,  # noqa: F821
     seed: integer seed (Sobol scrambling, or the uniforms' key).
 
   Returns:
-    [M, *z_shape(model)] array of the model's dtype, entries in [-1, 1].
+    `[M, *z_shape(model)]` array of the model's dtype, entries in [-1, 1].
   """
   arg_checks.check_int("num_samples", num_samples, minimum=1)
   arg_checks.check_seed("seed", seed)

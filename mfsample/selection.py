@@ -59,7 +59,7 @@ def next_views(model: Model, candidates: Camera, z: jax.Array, k: int, *,
   Args:
     model: a stochastic `mfsample.Model`.
     candidates: `Camera` batched over [C] (e.g. `mfsample.sphere_cameras`).
-    z: [M, *z_shape] samples of U (`mfsample.sample_z`; M >= 2).
+    z: `[M, *z_shape]` samples of U (`mfsample.sample_z`; M >= 2).
     k: how many to return (all C when k > C).
     settings: starting `RenderSettings` (the budget grows where a render overflows).
     background: [3] colour behind the Gaussians (default black).
@@ -93,7 +93,7 @@ def optimize_view(model: Model, camera: Camera, z: jax.Array, *, steps: int = 40
   Args:
     model: a stochastic `mfsample.Model`.
     camera: the start, an unbatched `Camera` (its intrinsics and size are kept).
-    z: [M, *z_shape] samples (`mfsample.sample_z`; the paper: M = 2).
+    z: `[M, *z_shape]` samples (`mfsample.sample_z`; the paper: M = 2).
     steps: Adam steps (>= 1).
     learning_rate: Adam's rate on (u, v) (>= 0).
     target: [3] the point the camera orbits and looks at (the scene's centre).
@@ -130,7 +130,7 @@ def next_lights(model: Model, cameras: Camera, z: jax.Array, lights: np.ndarray,
   Args:
     model: a stochastic relightable `Model` (`mfsample.lighting.init_relightable`).
     cameras: `Camera` [B] where the next captures will be taken (U summed over them).
-    z: [M, *z_shape] samples (`mfsample.sample_z`).
+    z: `[M, *z_shape]` samples (`mfsample.sample_z`).
     lights: [L, n] candidate SH lights (`mfsample.lighting.uniform_light`, ...).
     k: how many to return.
     settings: starting `RenderSettings`.
@@ -156,13 +156,13 @@ def optimize_light(model: Model, cameras: Camera, z: jax.Array, light: np.ndarra
 
   Projected Adam through the renderer (the paper's light optimiser; its numbers are ours,
   `mfsample.lighting.optimize`): the gradient's radial part is removed and every step is
-  projected back onto |xi| = |light|; the rate decays along a cosine from `learning_rate` to
+  projected back onto `|xi| = |light|`; the rate decays along a cosine from `learning_rate` to
   `final_learning_rate`.
 
   Args:
     model: a stochastic relightable `Model`.
     cameras: `Camera` [B] over which U is summed.
-    z: [M, *z_shape] samples.
+    z: `[M, *z_shape]` samples.
     light: [n] the start (non-zero).
     steps: Adam steps.
     learning_rate, final_learning_rate: the cosine schedule's ends.
@@ -170,7 +170,7 @@ def optimize_light(model: Model, cameras: Camera, z: jax.Array, light: np.ndarra
     max_budget: refuse to grow the budget beyond this.
 
   Returns:
-    [n] float64 numpy, the final light (|result| = |light|).
+    [n] float64 numpy, the final light (`|result| = |light|`).
   """
   _, n = light_u._check_model(model)
   light = lights_lib.check_light(light, n, "light")

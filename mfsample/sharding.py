@@ -80,7 +80,7 @@ def _pad(xs, total):
 
 
 def _skipping_padding(fn, example, args):
-  """(x, real) -> fn(x, *args) where `real`, else zeros of fn's output (nothing computed)."""
+  """(x, real) -> `fn(x, *args)` where `real`, else zeros of fn's output (nothing computed)."""
   shapes = jax.eval_shape(fn, example, *args)
 
   def one(x, real):
@@ -96,7 +96,7 @@ def _replicate_outputs(out, mesh):
 
 
 def map_sharded(fn, xs, *args, chunk_size=1, num_devices=1):
-  """fn(x, *args) for every x of a batch `xs` (a pytree with a leading axis); inside jit.
+  """`fn(x, *args)` for every x of a batch `xs` (a pytree with a leading axis); inside jit.
 
   The batch is processed `chunk_size` at a time (`jax.lax.map` with a vmapped chunk), so
   memory holds one chunk. With `num_devices` > 1 it is split over the first `num_devices`
@@ -111,7 +111,7 @@ def map_sharded(fn, xs, *args, chunk_size=1, num_devices=1):
   accelerators.
 
   Args:
-    fn: (one element of xs, *args) -> pytree of arrays.
+    fn: `(one element of xs, *args)` -> pytree of arrays.
     xs: pytree whose leaves share a leading axis [B] (a batched `Camera`, M `Gaussians`).
     *args: replicated arguments (pytrees).
     chunk_size: elements vmapped together.
@@ -155,7 +155,7 @@ def _lowest(x):
 
 def reduce_sharded(fn, xs, *args, num_devices=1):
   """(sum over the batch of `sums`, max over the batch of `maxes`), where
-  fn(x, *args) = (sums, maxes), two pytrees of numeric arrays; inside jit.
+  `fn(x, *args)` = (sums, maxes), two pytrees of numeric arrays; inside jit.
 
   With `num_devices` > 1 the batch is split over the first `num_devices` devices of
   `mesh_devices()` (args replicated); each device accumulates its elements one after
@@ -170,7 +170,7 @@ def reduce_sharded(fn, xs, *args, num_devices=1):
   devices' partial sums are added in the collective's order.
 
   Args:
-    fn: (one element of xs, *args) -> (sums, maxes).
+    fn: `(one element of xs, *args)` -> (sums, maxes).
     xs: pytree whose leaves share a leading axis [B].
     *args: replicated arguments (pytrees).
     num_devices: devices to split the batch over (static).
@@ -216,7 +216,7 @@ def reduce_sharded(fn, xs, *args, num_devices=1):
 
 
 def map_cameras(fn, cameras: Camera, *args, chunk_size=1, num_devices=1):
-  """`map_sharded` over a `Camera` batched over one axis [B]: fn(camera, *args) each."""
+  """`map_sharded` over a `Camera` batched over one axis [B]: `fn(camera, *args)` each."""
   if len(cameras.batch_shape) != 1:
     raise ValueError(f"map_cameras takes a Camera batched over one axis, got "
                      f"{cameras.batch_shape}")

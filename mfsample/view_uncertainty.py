@@ -62,7 +62,7 @@ def sample_gaussians(model, z):
 
   Args:
     model: a `mfsample.model.Model`.
-    z: [M, *samplers.z_shape(model)].
+    z: `[M, *samplers.z_shape(model)]`.
   """
   return jax.vmap(lambda zi: sample(model, zi))(z)
 
@@ -86,7 +86,7 @@ def uncertainty_of_samples(gaussians_m, camera: Camera, *, settings: RenderSetti
 
 
 def check_z(model, z, sync=False):
-  """Checks z for U: shape [M >= 1, *z_shape(model)] always (M = 0 would be a mean over no
+  """Checks z for U: shape `[M >= 1, *z_shape(model)]` always (M = 0 would be a mean over no
   samples, NaN); finite when on the host, or a JAX array with `sync` (a NaN row makes every
   Gaussian of that sample non-finite, the renderer culls them and U would come out finite
   and wrong: the jitted functions make it NaN instead)."""
@@ -118,7 +118,7 @@ def uncertainty(model: Model, camera: Camera, z: jax.Array, *,
   Args:
     model: `mfsample.model.Model` (any sampler kind; deterministic gives U = 0).
     camera: one unbatched `Camera`.
-    z: [M, *samplers.z_shape(model)] samples, e.g. `sample_z(model, 2)`.
+    z: `[M, *samplers.z_shape(model)]` samples, e.g. `sample_z(model, 2)`.
     settings: `RenderSettings` (static). Check `stats.overflow`: an overflowing render is
       incomplete; grow the budget (`mfsample.renderer.budget.fit_budget`) and call again.
     background: [3] colour behind the Gaussians (default black).
@@ -191,7 +191,7 @@ def score_cameras(model, cameras: Camera, z, *, settings: RenderSettings, backgr
   Args:
     model: `mfsample.model.Model`.
     cameras: `Camera` batched over [B].
-    z: [M, *z_shape] samples (`mfsample.samplers.sample_z`).
+    z: `[M, *z_shape]` samples (`mfsample.samplers.sample_z`).
     settings: starting `RenderSettings`.
     background: [3] colour (default black).
     chunk_size: cameras vmapped together (see `map_cameras`).

@@ -9,7 +9,7 @@ different directions, the scene volume is observed. Our exact score (host-side n
   at that pixel plus a tolerance, where the render is opaque);
 * the direction from p to camera k falls into one of B direction bins, the nearest of B
   Fibonacci-sphere directions (B = 64);
-* a set of cameras S scores
+* a set of cameras S scores::
 
     A(S) = (1 / R^3) sum_p [ 1(some camera of S observes p) + w * |bins of S at p| / B ],
 

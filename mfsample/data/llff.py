@@ -113,7 +113,7 @@ def load_llff(path, *, factor=8):
 
 
 def poses_bounds_from_cameras(cameras, bounds):
-  """Inverse of the loader's pose conversion: `Camera`s -> a [V, 17] `poses_bounds` array.
+  """Inverse of the loader's pose conversion: cameras (`Camera`) -> a [V, 17] `poses_bounds` array.
 
   Useful to write synthetic LLFF folders (tests, exports). The stored (h, w, f) are the
   camera's own size and fx; the principal point must be centred and fx == fy.

@@ -250,6 +250,6 @@ VARIANTS = {f.__name__: f for f in (tiny,)}
 
 
 def get_config(variant=""):
-  """`default_config()` with the comma-separated `variant`s applied (`VARIANTS`)."""
+  """`default_config()` with the comma-separated `variant` names applied (`VARIANTS`)."""
   return cc.with_variants(default_config(), variant, VARIANTS,
                             "configs/light_planning.py")

@@ -60,7 +60,7 @@ def check_lights(lights, n, name="lights"):
 
 
 def on_sphere(xi, norm=UNIFORM_NORM):
-  """xi scaled to |xi| = norm (ValueError for a zero light, which has no direction)."""
+  """xi scaled to `|xi| = norm` (ValueError for a zero light, which has no direction)."""
   arg_checks.check_real_dtype("xi", xi)
   xi = np.asarray(xi, np.float64)
   arg_checks.check_finite("xi", xi)

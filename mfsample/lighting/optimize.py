@@ -42,7 +42,7 @@ class AscentSettings:
     steps: Adam steps.
     lr: Adam learning rate at the first step (b1, b2, eps: Adam's defaults, as the paper).
     final_lr: the rate at the last step (cosine decay from `lr`).
-    norm: the sphere |xi| = norm the iterate stays on.
+    norm: the sphere `|xi| = norm` the iterate stays on.
   """
 
   steps: int = 100
@@ -61,7 +61,7 @@ class AscentResult(NamedTuple):
   """What `ascend` returns.
 
   Attributes:
-    light: [n] the final light (|light| = norm).
+    light: [n] the final light (`|light| = norm`).
     value: U(light).
     values: [steps] U at the start of every step.
     trajectory: [steps + 1, n] the light before every step and after the last.
@@ -112,7 +112,7 @@ def ascend(model, cameras, z, xi0, *, opt: AscentSettings, settings: RenderSetti
   Args:
     model: a relightable `Model`.
     cameras: `Camera` [B] over which U is summed.
-    z: [M, *z_shape] samples (the same at every step, as the camera optimisation).
+    z: `[M, *z_shape]` samples (the same at every step, as the camera optimisation).
     xi0: [n] start (scaled onto the sphere first).
     opt: `AscentSettings`.
     settings: starting `RenderSettings`.

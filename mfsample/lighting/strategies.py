@@ -54,7 +54,7 @@ class LightInputs(NamedTuple):
   Attributes:
     model: the relightable model trained on the lights used so far.
     cameras: `Camera` [B] over which U is summed.
-    z: [M, *z_shape] samples of U.
+    z: `[M, *z_shape]` samples of U.
     q: [n, n] Q of U(xi) = xi^T Q xi for this model, cameras and z.
     used: [index, n] the lights used so far.
     index: the number of lights used so far.
@@ -80,7 +80,7 @@ class LightChoice(NamedTuple):
   """A strategy's answer.
 
   Attributes:
-    light: [n] float64, |light| = norm, positive DC coefficient.
+    light: [n] float64, `|light| = norm`, positive DC coefficient.
     info: json-able extras.
     renders: the inputs' `LightRenders`, with those the strategy grew.
   """

@@ -128,7 +128,7 @@ def light_uncertainty(model, cameras, z, xi, *, settings: RenderSettings, num_de
   Args:
     model: a relightable `mfsample.model.Model` (`field`).
     cameras: `Camera` batched over [B].
-    z: [M, *samplers.z_shape(model)] samples (`mfsample.samplers.sample_z`).
+    z: `[M, *samplers.z_shape(model)]` samples (`mfsample.samplers.sample_z`).
     xi: [n] white SH light (finite; checked when concrete).
     settings: `RenderSettings` (static); check `stats.overflow`, or use
       `light_uncertainty_fitted`, which grows the budget.
@@ -204,7 +204,7 @@ def light_gram(model, cameras, z, *, settings: RenderSettings, max_budget=1 << 2
   Args:
     model: a relightable `Model`.
     cameras: `Camera` [B].
-    z: [M, *z_shape] samples.
+    z: `[M, *z_shape]` samples.
     settings: starting `RenderSettings`.
     max_budget: refuse to grow the budget beyond this (BudgetExceededError).
     num_devices: devices to shard the cameras over (default: all, at most B).

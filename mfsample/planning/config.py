@@ -345,7 +345,7 @@ VARIANTS = {f.__name__: f for f in (lego, rounds2000, authors_rounds, fullres, d
 
 
 def get_config(variant=""):
-  """`default_config()` with the comma-separated `variant`s applied (`VARIANTS`)."""
+  """`default_config()` with the comma-separated `variant` names applied (`VARIANTS`)."""
   return config_checks.with_variants(default_config(), variant, VARIANTS,
                                      "configs/camera_planning.py")
 

@@ -208,7 +208,7 @@ def optimize_spherical(model, uv0, z, *, sphere: poses.SphereSpec, opt=OptimizeS
   Args:
     model: stochastic `mfsample.model.Model`.
     uv0: [2] starting (u, v) (projected onto the valid band first).
-    z: [M, *z_shape] samples (`mfsample.samplers.sample_z`; paper M = 2); with
+    z: `[M, *z_shape]` samples (`mfsample.samplers.sample_z`; paper M = 2); with
       `opt.resample_z` only its shape is used.
     sphere: `poses.SphereSpec` (static; its image size is the optimisation's resolution).
     opt: `OptimizeSettings`.

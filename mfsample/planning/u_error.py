@@ -67,7 +67,7 @@ def u_against_error(model, cameras: Camera, z, *, background, images=None, train
   Args:
     model: a trained `mfsample.model.Model`.
     cameras: `Camera` [B] of the candidates.
-    z: [M, *z_shape] samples of U (`mfsample.samplers.sample_z`).
+    z: `[M, *z_shape]` samples of U (`mfsample.samplers.sample_z`).
     background: [3] colour behind the Gaussians.
     images: optional [B, H, W, 3] ground truth of the candidates.
     train_cameras: optional `Camera` [V] the model was trained on (the angle to the nearest).

@@ -43,7 +43,7 @@ class SampleMaps(NamedTuple):
 
 @functools.partial(jax.jit, static_argnames=("settings",))
 def sample_maps(model, camera, z, background, *, settings: RenderSettings) -> SampleMaps:
-  """Ours' colour and depth maps from the samples theta(z_m), z: [M, *z_shape].
+  """Ours' colour and depth maps from the samples theta(z_m), z: `[M, *z_shape]`.
 
   The samples are rendered one after another (`lax.map`), as `uncertainty.uncertainty` does.
   """

@@ -2,7 +2,7 @@
 
 For pixel p and the depth-ordered Gaussians i of its tile (3DGS, Kerbl et al. 2023, Eq. 3),
 with o_i the opacity, d_i(p) the Mahalanobis distance of p from the projected centre and
-f_i the blended features:
+f_i the blended features::
 
   alpha_i = min(alpha_max, o_i exp(-d_i(p)^2 / 2)),  skipped (alpha_i = 0) where
             d_i(p) > r(o_i) = min(radius_sigma, sqrt(2 ln(o_i / alpha_min))),

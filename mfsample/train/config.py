@@ -142,7 +142,7 @@ VARIANTS = {f.__name__: f for f in (lego, tiny)}
 
 
 def get_config(variant=""):
-  """`default_config()` with the comma-separated `variant`s applied (`VARIANTS`)."""
+  """`default_config()` with the comma-separated `variant` names applied (`VARIANTS`)."""
   return config_checks.with_variants(default_config(), variant, VARIANTS, "configs/train.py")
 
 

@@ -71,7 +71,7 @@ def evaluate(model, views, *, background, settings, lpips_fn=None, uncertainty_z
     background: [3] colour.
     settings: `RenderSettings` to start from (grown on overflow, never truncated).
     lpips_fn: optional `metrics.make_lpips(...)` function.
-    uncertainty_z: optional [M, *z_shape] samples for the uncertainty maps (stochastic
+    uncertainty_z: optional `[M, *z_shape]` samples for the uncertainty maps (stochastic
       models only).
 
   Returns:

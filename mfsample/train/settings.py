@@ -26,7 +26,7 @@ class LossSettings:
 
   Attributes:
     ssim_weight: w of the D-SSIM term (3DGS: 0.2).
-    volume_weight: lambda of the volume term on the plain sum of |B_hat|; None: 1 / (number
+    volume_weight: lambda of the volume term on the plain sum of `|B_hat|`; None: 1 / (number
       of training views), as in the authors' code (the paper's text says 1).
     volume_every: the volume term is applied on every `volume_every`-th step only (paper).
     volume_stop_before_end: no volume term in the run's last steps (authors: 100).

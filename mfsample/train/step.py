@@ -204,7 +204,7 @@ def _mask_rows(tree, mask):
 
 
 def step_z(cfg, model, key, position, step, rows):
-  """z [M, *z_shape] of the target at `position` of the target order, in step `step`.
+  """z `[M, *z_shape]` of the target at `position` of the target order, in step `step`.
 
   The target's Sobol rows where the spec's z source is Sobol, else fresh uniforms from
   `fold_in(key, position)` (`samplers.draw_z`); zero from `stochastic_until` on (the mean

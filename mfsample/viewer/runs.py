@@ -9,8 +9,8 @@ Three jobs answer "where next?":
 | `light_planning`  | `experiments/light_planning.py`   | one light chosen by one strategy       |
 
 The kind is the job that `config.json` records having written the workdir (`_written_by`,
-`mfsample.config_record.WRITTEN_BY`). A `Run` lists its `Step`s from the files the job
-writes (re-read on every call, so the rounds, lights and proposals of a running job appear
+`mfsample.config_record.WRITTEN_BY`). A `Run` lists its steps (`Step`) from the files the
+job writes (re-read on every call, so the rounds, lights and proposals of a running job appear
 as they are written; the jobs write every file atomically, so a file not there yet is
 skipped until a later call). Cameras and ground-truth images come from the job's own inputs
 (its dataset, pool or captures, rebuilt from `config.json` with the library's loaders by
@@ -265,7 +265,7 @@ def _kinds_sentence():
 
 
 class Run:
-  """A workdir of one kind: its `Step`s, its inputs and its models.
+  """A workdir of one kind: its steps (`Step`), its inputs and its models.
 
   Attributes:
     kind: a key of `KINDS`.
@@ -415,7 +415,7 @@ class Run:
     raise NotImplementedError
 
   def steps(self):
-    """The run's `Step`s in the order the job made them (re-read from the files); the
+    """The run's steps (`Step`) in the order the job made them (re-read from the files); the
     damaged files met are in `problems`."""
     self._problems = {}
     self._model_problems = {p: line for p, line in self._model_problems.items()

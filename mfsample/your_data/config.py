@@ -138,6 +138,6 @@ VARIANTS = {f.__name__: f for f in (colmap, posthoc, tiny)}
 
 
 def get_config(variant=""):
-  """`default_config()` with the comma-separated `variant`s applied (`VARIANTS`)."""
+  """`default_config()` with the comma-separated `variant` names applied (`VARIANTS`)."""
   return checks.with_variants(default_config(), variant, VARIANTS,
                                 "configs/next_views.py")

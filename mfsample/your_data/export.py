@@ -61,7 +61,7 @@ def export_next_views(directory, model, cameras, z, *, settings, background, nam
     directory: output folder.
     model: the `mfsample.model.Model` whose uncertainty proposed the views.
     cameras: `Camera` batched over [V] (e.g. the top k candidates, best first).
-    z: [M, *z_shape] samples of U (`mfsample.samplers.sample_z`).
+    z: `[M, *z_shape]` samples of U (`mfsample.samplers.sample_z`).
     settings: `RenderSettings` to start from (grown on overflow).
     background: [3] colour behind the Gaussians.
     names: V view names (default view_000 ...).
