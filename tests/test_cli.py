@@ -208,8 +208,10 @@ def test_a_built_wheel_runs_a_job_in_a_fresh_environment(tmp_path):
 
   listing = _run([python, "-m", "mfsample", "--help"], cwd=run, env=env)
   assert all(f"  {name} " in listing.stdout for name in cli.COMMANDS)
-  (run / "empty").mkdir()
-  viewer = subprocess.run([script, "viewer", "--workdir=empty"], cwd=run, env=env,
-                          capture_output=True, text=True, timeout=300, check=False)
+  # The viewer shows planning jobs: the training workdir is refused at once, in one line.
+  viewer = subprocess.run([script, "viewer", f"--workdir={workdir.relative_to(run)}"],
+                          cwd=run, env=env, capture_output=True, text=True, timeout=300,
+                          check=False)
   assert viewer.returncode == 1 and "Traceback" not in viewer.stderr
-  assert "error: empty holds no run" in viewer.stderr, viewer.stderr
+  assert "holds a run of the 'training' job, which the viewer does not" in viewer.stderr, (
+      viewer.stderr)
