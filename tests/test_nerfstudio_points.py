@@ -4,10 +4,10 @@ import numpy as np
 import plyfile
 import pytest
 
-from mfsample.data import DatasetError, PointCloud, Views, export_nerfstudio
-from mfsample.data.nerfstudio import read_points
 from mfsample import orbit_camera
 from mfsample.camera import Camera
+from mfsample.data import DatasetError, PointCloud, Views, export_nerfstudio
+from mfsample.data.nerfstudio import read_points
 
 XYZ = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], np.float32)
 
