@@ -17,6 +17,12 @@ perturbation are `mfsample.samplers`'.
 Shapes are static: every array has a leading *capacity* axis C, and `mask` marks the live
 rows. Capacity grows on the host in buckets (`capacity_bucket`), never inside jit.
 
+Validity (as `mfsample.camera`'s): a model is valid when every raw parameter of its live
+Gaussians is finite and every B_hat entry is finite and at most its bound. `Model.valid` is
+the test as a jnp flag (jitted code makes its answer NaN where it is False),
+`problems()` / `validate()` name the field, group and Gaussian, and `check_model` is the
+check every public function that takes a model makes (`mfsample.arg_checks`' rule).
+
 Groups are a dict so that a later variant (a relightable field's transfer matrices) adds a
 group without touching the samplers: every group is an array [C, ...] and the samplers
 treat them alike.

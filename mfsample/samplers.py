@@ -19,7 +19,9 @@ C is the capacity and D the number of stochastic entries per Gaussian (groups in
 `groups.GROUP_ORDER` order, each flattened). z is uniform on [-1, 1]: for the low-rank
 sampler a scrambled Sobol sequence (paper Sec. 4.3) unless the spec asks for uniforms; for
 the per-Gaussian samplers pseudo-random uniforms (Sobol sequences stop at 21201 dimensions
-and bring nothing at millions). `sample_z` is the one way to draw the z of U.
+and bring nothing at millions). `sample_z` is the one way to draw the z of U; a z outside
+[-1, 1] (`Z_RANGE`, `z_in_range`) is refused by the functions of U, or makes their answer
+NaN where traced.
 
 A new kind is its maths (a z-shape function and an offsets function) and one `SamplerKind`
 entry in `KINDS`: validators, configs, checkpoints, tables and the viewer read the registry.

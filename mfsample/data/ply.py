@@ -21,8 +21,11 @@ Reading accepts any SH degree 0-3 (told by the number of `f_rest_*` properties),
 in any order and of any float type, big- or little-endian data, and ignores properties it does
 not use (normals, colours of point-cloud tools, extra per-Gaussian data). It refuses, naming
 the file and the property: missing properties, an `f_rest` count that is no SH degree,
-non-finite values, truncated data, and ASCII files (3DGS tools write binary; an ASCII file of
-a real model is gigabytes of text, and far more often a mesh or point cloud saved by mistake).
+non-finite values, truncated data, data after the rows the header declares (a count too
+small: the rows after it would be dropped without a word), and ASCII files (3DGS tools write
+binary; an ASCII file of a real model is gigabytes of text, and far more often a mesh or
+point cloud saved by mistake). `read_ply_data` is the reader every `.ply` goes through
+(point clouds too, where ASCII is allowed): a file is read in full or refused.
 """
 
 from pathlib import Path
