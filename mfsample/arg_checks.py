@@ -117,10 +117,11 @@ def all_finite(x):
 def nan_unless(ok, x):
   """`x` where the scalar bool `ok` holds, NaN (of x's dtype, same shape) where it does not.
 
-  The traced half of the convention: a value that cannot raise makes the answer NaN. The
-  gradient through `x` is unchanged where `ok` holds.
+  The traced half of the convention: a value that cannot raise makes the answer NaN. Where
+  `ok` holds, `x` and the gradient through it are unchanged, bit for bit.
   """
-  return x + jnp.where(ok, 0.0, jnp.nan).astype(jnp.result_type(x))
+  x = jnp.asarray(x)
+  return jnp.where(ok, x, jnp.asarray(jnp.nan, x.dtype))
 
 
 def check_shape(name, x, shape, what=None):
@@ -131,6 +132,27 @@ def check_shape(name, x, shape, what=None):
     want = "[" + ", ".join("?" if s is None else str(s) for s in shape) + "]"
     raise ValueError(f"{name} must have shape {want}{' (' + what + ')' if what else ''}, "
                      f"got {list(got)}")
+
+
+def check_float_dtype(name, x, what="floats"):
+  """ValueError naming `name` unless `x` holds floats: an integer or bool array (a uint8
+  colour, say) is refused, since its values are on another scale (0..255) than the floats
+  the function takes. Python numbers pass (they are weakly typed: `(1, 1, 1)` is the float
+  colour white). Dtypes are static, so this also holds under `jit`."""
+  for leaf in jax.tree.leaves(x):
+    dtype = np.dtype(leaf.dtype if hasattr(leaf, "dtype") else np.asarray(leaf).dtype)
+    weak = isinstance(leaf, (int, float)) and not isinstance(leaf, bool) or (
+        isinstance(leaf, jax.Array) and jax.typeof(leaf).weak_type)
+    if dtype == np.bool_ or (np.issubdtype(dtype, np.integer) and not weak):
+      raise ValueError(f"{name} must hold {what}, got dtype {dtype}")
+
+
+def concrete_bool(fn, *args):
+  """`bool(fn(*args))` for concrete `args`, evaluated at once even while a caller is being
+  traced (a function closed over a concrete model inside `jit` or `grad`): one flag is
+  fetched from the device."""
+  with jax.ensure_compile_time_eval():
+    return bool(fn(*args))
 
 
 def check_real_dtype(name, x):

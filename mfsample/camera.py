@@ -15,7 +15,8 @@ A `Camera` is a pytree: `world_to_camera`, `fx`, `fy`, `cx`, `cy` are differenti
 
 Validity. A camera is *valid* when its pose is finite and rigid (a rotation: R^T R = I and
 det R = +1 within `RIGID_TOLERANCE`, so neither scaled, sheared nor reflected; bottom row
-[0, 0, 0, 1]) and its intrinsics are finite with fx, fy > 0.
+[0, 0, 0, 1]), its translation within `mfsample.numerics.WORLD_LIMIT` (1e18) world units, and
+its intrinsics are finite with fx, fy > 0.
 
 * Eagerly (concrete values), the constructors `create`, `look_at` and `from_blender` raise
   `InvalidCameraError` naming the field, the batch index and what is wrong.
@@ -177,7 +178,8 @@ class Camera:
 
   @property
   def valid(self):
-    """[...] bool: finite, rigid pose and finite intrinsics with fx, fy > 0.
+    """[...] bool: finite, rigid pose within `numerics.WORLD_LIMIT` of the origin, and finite
+    intrinsics with fx, fy > 0.
 
     Pure jnp, so it works under jit / vmap / grad (no gradient flows through it).
     """
@@ -189,6 +191,7 @@ class Camera:
                      axis=-1)
     det = jnp.linalg.det(rot)
     finite = jnp.all(jnp.isfinite(w2c), axis=(-2, -1))
+    finite = finite & jnp.all(jnp.abs(w2c[..., :3, 3]) <= numerics.WORLD_LIMIT, axis=-1)
     intrinsics = [self.fx, self.fy, self.cx, self.cy]
     finite = finite & jnp.all(jnp.stack([jnp.isfinite(v) for v in intrinsics]), axis=0)
     # Comparisons with NaN are False, so a non-finite pose also fails the rigidity tests.
@@ -221,6 +224,12 @@ class Camera:
         out.append(message(index, where))
 
     report(~finite, lambda i, at: f"Camera.world_to_camera{at} has non-finite entries")
+    far = finite & np.any(np.abs(safe[..., :3, 3]) > numerics.WORLD_LIMIT, axis=-1)
+    report(far, lambda i, at: (
+        f"Camera.world_to_camera{at} has the translation "
+        f"[{', '.join(f'{v:.4g}' for v in safe[i][:3, 3])}], out of "
+        f"range: the camera must sit within {numerics.WORLD_LIMIT:g} world units of the "
+        "origin (float32 squares of larger distances overflow)"))
     report(bottom > RIGID_TOLERANCE, lambda i, at: (
         f"Camera.world_to_camera{at} has bottom row {w2c[i][3].tolist()}, expected "
         "[0, 0, 0, 1]"))
@@ -316,9 +325,10 @@ def _check_fov(name, fov):
 
 
 def _check_look_at(eye, target, up):
-  """Shapes: [..., 3] each, batches that broadcast. Concrete values: a finite, non-zero `up`
-  (eye and target are checked as the pose they make). A NaN `up` would otherwise surface as
-  a "not rigid" pose, and a zero one would silently take a fallback axis."""
+  """Shapes: [..., 3] each, batches that broadcast. Concrete values: finite `eye` and `target`
+  within `numerics.WORLD_LIMIT`, a finite, non-zero `up`. A NaN `up` or a far eye would
+  otherwise surface as a "not rigid" pose, and a zero `up` would silently take a fallback
+  axis."""
   for name, v in (("eye", eye), ("target", target), ("up", up)):
     if v.ndim < 1 or v.shape[-1] != 3:
       raise ValueError(f"Camera.look_at: {name} must have shape [..., 3], got {list(v.shape)}")
@@ -327,6 +337,21 @@ def _check_look_at(eye, target, up):
   except ValueError:
     raise ValueError(f"Camera.look_at: the batch shapes of eye {list(eye.shape)}, target "
                      f"{list(target.shape)} and up {list(up.shape)} do not broadcast") from None
+  for name, v in (("eye", eye), ("target", target)):
+    # Checked as points, not only as the pose they make: a far eye squares to inf in
+    # float32 and would be reported as a pose that is "not rigid".
+    if isinstance(v, jax.core.Tracer):
+      continue
+    values = np.asarray(v, np.float64)
+    if not np.all(np.isfinite(values)):
+      raise InvalidCameraError(f"Camera.look_at: {name} has non-finite entries "
+                               f"({values.tolist() if values.size <= 12 else 'a batch'})")
+    if np.any(np.abs(values) > numerics.WORLD_LIMIT):
+      worst = float(np.max(np.abs(values)))
+      raise InvalidCameraError(
+          f"Camera.look_at: {name} is out of range (a coordinate of magnitude {worst:g}); "
+          f"positions must lie within {numerics.WORLD_LIMIT:g} world units of the origin "
+          "(float32 squares of larger distances overflow)")
   if isinstance(up, jax.core.Tracer):
     return
   values = np.asarray(up, np.float64).reshape(-1, 3)

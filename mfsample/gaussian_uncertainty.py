@@ -46,14 +46,19 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from mfsample import samplers
+from mfsample import arg_checks, samplers
 from mfsample.camera import Camera
 from mfsample.model import mean_gaussians
 from mfsample.renderer import render
 from mfsample.renderer.budget import render_with_budget
 from mfsample.renderer.settings import RenderSettings
 from mfsample.renderer.sh import sh_basis
-from mfsample.view_uncertainty import sample_gaussians, uncertainty_of_samples
+from mfsample.view_uncertainty import (
+    check_inputs,
+    inputs_ok,
+    sample_gaussians,
+    uncertainty_of_samples,
+)
 
 
 class GaussianUncertainty(NamedTuple):
@@ -100,6 +105,8 @@ def view_share(model, camera: Camera, z, background, *, settings: RenderSettings
 
   ones = jnp.ones((model.capacity,), variance.dtype)
   share, mean_stats = jax.grad(weighted_variance, has_aux=True)(ones)
+  ok = inputs_ok(model, z, background)  # traced values cannot raise: NaN, never finite
+  share, variance = arg_checks.nan_unless(ok, share), arg_checks.nan_unless(ok, variance)
   stats = jax.tree.map(lambda s, m: jnp.concatenate([jnp.atleast_1d(s), m[None]]), unc.stats,
                        mean_stats)
   return share, variance, stats
@@ -143,6 +150,7 @@ def gaussian_uncertainty(model, cameras: Camera, z, *, settings: RenderSettings,
   if len(cameras.batch_shape) > 1:
     raise ValueError(f"cameras must be one camera or a batch [V], got batch shape "
                      f"{cameras.batch_shape}")
+  check_inputs(model, z, background, sync=True)  # it synchronises anyway
   dtype = model.params.mean["means"].dtype
   background = jnp.zeros((3,), dtype) if background is None else jnp.asarray(background, dtype)
   share = np.zeros((model.capacity,), np.float64)

@@ -17,11 +17,18 @@ perturbation are `mfsample.samplers`'.
 Shapes are static: every array has a leading *capacity* axis C, and `mask` marks the live
 rows. Capacity grows on the host in buckets (`capacity_bucket`), never inside jit.
 
+Validity (as `mfsample.camera`'s): a model is valid when every raw parameter of its live
+Gaussians is finite and every B_hat entry is finite and at most its bound. `Model.valid` is
+the test as a jnp flag (jitted code makes its answer NaN where it is False),
+`problems()` / `validate()` name the field, group and Gaussian, and `check_model` is the
+check every public function that takes a model makes (`mfsample.arg_checks`' rule).
+
 Groups are a dict so that a later variant (a relightable field's transfer matrices) adds a
 group without touching the samplers: every group is an array [C, ...] and the samplers
 treat them alike.
 """
 
+import functools
 from typing import NamedTuple
 
 import chex
@@ -29,10 +36,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from mfsample import arg_checks
+from mfsample import arg_checks, numerics
 from mfsample._pytree import pytree_dataclass, replace, static_field
 from mfsample.gaussians import Gaussians
-from mfsample.groups import GROUP_ORDER
+from mfsample.groups import GROUP_ORDER, ordered
 from mfsample.samplers import SamplerSpec, perturb
 
 # Log-scales are clamped to this range before exp: far beyond any real Gaussian (e^10 world
@@ -43,6 +50,10 @@ LOG_SCALE_RANGE = (-30.0, 10.0)
 # Neutral values for padding rows: finite, and harmless even if a mask were dropped
 # (opacity sigmoid(-20) ~ 2e-9 is below any alpha threshold).
 _PAD_OPACITY_LOGIT = -20.0
+
+
+class InvalidModelError(ValueError):
+  """A model with a non-finite parameter, or a B_hat entry above its bound."""
 
 
 class Params(NamedTuple):
@@ -94,6 +105,91 @@ class Model:
 
   def replace(self, **changes):
     return replace(self, **changes)
+
+  # ---------------------------------------------------------------- validity
+
+  @property
+  def valid(self):
+    """Scalar bool: every raw parameter of every live Gaussian is finite, and every raw
+    B_hat entry of a live Gaussian is finite and at most its bound (`SamplerSpec.bounds`:
+    training keeps relu(raw) in [0, bound]).
+
+    Pure jnp, so it works under jit / vmap / grad. The renderer culls a Gaussian with a
+    non-finite parameter, so without this test a broken model renders, and its U comes
+    out finite (0 when every sample is culled alike).
+    """
+    live = self.mask
+
+    def rows(ok):
+      return jnp.all(jnp.all(ok.reshape(ok.shape[0], -1), axis=-1) | ~live)
+
+    ok = [rows(jnp.isfinite(v)) for v in self.params.mean.values()]
+    for g, v in self.params.b_hat.items():
+      # In the entries' dtype: the training clamp rounds the bound the same way.
+      ok.append(rows(jnp.isfinite(v) & (v <= jnp.asarray(self.spec.bound(g), v.dtype))))
+    return functools.reduce(jnp.logical_and, ok, jnp.asarray(True))
+
+  def problems(self):
+    """What makes this (concrete) model invalid (`valid`): a list of messages naming the
+    field, the group and the first Gaussian, empty when valid. Host numpy: it syncs."""
+    live = np.asarray(self.mask, bool)
+    num_live = int(live.sum())
+    out = []
+    for kind, groups in (("mean", self.params.mean), ("b_hat", self.params.b_hat)):
+      for g in ordered(groups):
+        values = np.asarray(groups[g])
+        rows = values.reshape(values.shape[0], -1)
+        bad = ~np.all(np.isfinite(rows), axis=-1) & live
+        field = f"model.params.{kind}[{g!r}]"
+        if np.any(bad):
+          i = int(np.argmax(bad))
+          out.append(f"{field}[{i}] (Gaussian {i}) is not finite ({int(bad.sum())} of "
+                     f"{num_live} live Gaussians)")
+          continue
+        if kind == "b_hat":
+          bound = np.asarray(self.spec.bound(g), values.dtype)
+          above = np.any(rows > bound, axis=-1) & live
+          if np.any(above):
+            i = int(np.argmax(above))
+            out.append(f"{field}[{i}] (Gaussian {i}) reaches {float(np.max(rows[i])):g}, above "
+                       f"its bound {float(bound):g} (SamplerSpec.bounds; training keeps B_hat "
+                       f"in [0, bound]; {int(above.sum())} of {num_live} live Gaussians)")
+    return out
+
+  def validate(self):
+    """Raises `InvalidModelError` listing `problems()`; returns the model when valid."""
+    problems = self.problems()
+    if problems:
+      raise InvalidModelError("invalid model: " + "; ".join(problems) + ".")
+    return self
+
+
+_valid = jax.jit(lambda model: model.valid)
+
+
+def check_model(model, *, sync=False, name="model"):
+  """The check every public function that takes a model makes (`mfsample.arg_checks`'s rule).
+
+  Always: `model` is a `Model` (else ValueError naming `name`). Its values (`Model.valid`)
+  are checked when concrete: on the host, or on the device with `sync` (for functions that
+  synchronise anyway; one flag is fetched, the arrays only when it is False). A bad model
+  raises `InvalidModelError` naming the field, the group and the Gaussian. Traced, or on the
+  device without `sync`, nothing is checked here: the function's jitted part makes its
+  answer NaN where `model.valid` is False (`nan_unless`).
+
+  Returns:
+    `model`.
+  """
+  if not isinstance(model, Model):
+    raise ValueError(f"{name} must be a mfsample.Model, got {type(model).__name__}")
+  if arg_checks.is_traced(model):
+    return model
+  on_device = any(isinstance(leaf, jax.Array) for leaf in jax.tree.leaves(model))
+  if on_device and not sync:
+    return model
+  if not arg_checks.concrete_bool(_valid, model):
+    model.validate()
+  return model
 
 
 def group_shapes(sh_degree):
@@ -194,14 +290,16 @@ def init_b_hat(rng, num, shapes, spec, init_scales, dtype=np.float32):
 
   Returns:
     (b_hat {group: [num, ..., k]}, signs {group: int8 same shape}) as numpy arrays; empty
-    for the deterministic sampler.
+    for the deterministic sampler. Entries are clamped to the spec's bounds, as after
+    every training step: an init scale above a bound gives entries at the bound.
   """
   b_hat, signs = {}, {}
   if not spec.stochastic:
     return b_hat, signs
   for g in sorted(set(spec.groups) & set(shapes), key=GROUP_ORDER.index):
     shape = (num,) + tuple(shapes[g]) + spec.columns
-    b_hat[g] = (init_scales[g] * rng.random(shape)).astype(dtype)
+    raw = (init_scales[g] * rng.random(shape)).astype(dtype)
+    b_hat[g] = np.minimum(raw, np.asarray(spec.bound(g), dtype))
     signs[g] = np.where(rng.random(shape) < 0.5, 1, -1).astype(np.int8)
   return b_hat, signs
 
@@ -229,10 +327,11 @@ def init_model(key: jax.Array, points: np.ndarray, *, spec: SamplerSpec, sh_degr
 
   Args:
     key: PRNG key (colours, B_hat entries and signs).
-    points: [N, 3] initial centres (host array), N >= 1.
+    points: [N, 3] initial centres (host array), N >= 1, finite and within
+      `mfsample.numerics.WORLD_LIMIT` (1e18) of the origin.
     spec: `SamplerSpec`.
     sh_degree: maximum SH degree (0..3); no SH-rest arrays when 0.
-    init_scales: {group: float} see `init_b_hat`.
+    init_scales: {group: float} see `init_b_hat` (entries are clamped to the spec's bounds).
     capacity: C >= N (default `capacity_bucket(N)`).
     init_opacity: initial opacity in (0, 1).
     colors: optional [N, 3] RGB in [0, 1].
@@ -285,9 +384,10 @@ def model_from_mean(key, mean, *, spec, init_scales, capacity=None):
   Args:
     key: PRNG key (B_hat entries and signs).
     mean: {group: [N, ...]} raw parameters of every group of `group_shapes(degree)` (e.g.
-      `mfsample.data.ply.load_ply`), N >= 1.
+      `mfsample.data.ply.load_ply`), N >= 1: finite in float32, centres within
+      `mfsample.numerics.WORLD_LIMIT` (1e18) of the origin.
     spec: `SamplerSpec`.
-    init_scales: {group: float} see `init_b_hat`.
+    init_scales: {group: float} see `init_b_hat` (entries are clamped to the spec's bounds).
     capacity: C >= N (default `capacity_bucket(N)`).
 
   Returns:
@@ -306,7 +406,8 @@ def model_from_mean(key, mean, *, spec, init_scales, capacity=None):
   if n < 1:
     raise ValueError("mean holds no Gaussians")
   for g in shapes:
-    _check_finite_rows(f"mean[{g!r}]", np.asarray(mean[g], np.float64).reshape(n, -1))
+    _check_finite_rows(f"mean[{g!r}]", np.asarray(mean[g], np.float64).reshape(n, -1),
+                       limit=numerics.WORLD_LIMIT if g == "means" else _FLOAT32_MAX)
   capacity = capacity_bucket(n) if capacity is None else arg_checks.check_int(
       "capacity", capacity, minimum=1)
   if capacity < n:
@@ -330,7 +431,7 @@ def check_initial(points, capacity, init_opacity):
   points = np.asarray(points, np.float64)
   if points.ndim != 2 or points.shape[1] != 3 or len(points) < 1:
     raise ValueError(f"points must have shape [N >= 1, 3], got {points.shape}")
-  _check_finite_rows("points", points)
+  _check_finite_rows("points", points, limit=numerics.WORLD_LIMIT)
   n = len(points)
   if capacity is None:
     capacity = capacity_bucket(n)
@@ -373,11 +474,25 @@ def _check_colors(colors, n):
   return colors
 
 
-def _check_finite_rows(name, x):
+_FLOAT32_MAX = float(np.finfo(np.float32).max)
+
+
+def _check_finite_rows(name, x, limit=None):
+  """ValueError naming `name` and the first row with a non-finite entry, or (with `limit`)
+  one of magnitude above `limit`: models are float32, so a finite float64 of 1e39 would
+  become inf there."""
   bad = ~np.all(np.isfinite(x), axis=-1)
   if np.any(bad):
     raise ValueError(f"{name}[{int(np.argmax(bad))}] is not finite ({int(bad.sum())} row(s) "
                      "with NaN or inf)")
+  if limit is not None:
+    far = np.any(np.abs(x) > limit, axis=-1)
+    if np.any(far):
+      i = int(np.argmax(far))
+      raise ValueError(f"{name}[{i}] = {np.asarray(x[i]).tolist()} is out of range: "
+                       f"magnitudes must be at most {limit:g} ({int(far.sum())} row(s) beyond; "
+                       + ("world coordinates beyond it overflow float32's squares)"
+                          if limit == numerics.WORLD_LIMIT else "the model is float32)"))
 
 
 def knn_scale(points, k=3):

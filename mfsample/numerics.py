@@ -10,6 +10,12 @@ import jax.numpy as jnp
 
 TINY = 1e-12
 
+# The largest world coordinate (camera centres, initial points, Gaussian centres) the float32
+# maths handles: squared distances of coordinates up to 1e18 stay below float32's maximum
+# (3.4e38) with room for sums of three; beyond it `safe_normalize` squares to inf and a
+# camera looking at the scene gets a zero rotation.
+WORLD_LIMIT = 1e18
+
 
 def safe_normalize(x, axis=-1, fallback=None, eps=TINY):
   """x / |x|, returning `fallback` (default: zeros) where |x|^2 <= eps."""

@@ -19,7 +19,9 @@ C is the capacity and D the number of stochastic entries per Gaussian (groups in
 `groups.GROUP_ORDER` order, each flattened). z is uniform on [-1, 1]: for the low-rank
 sampler a scrambled Sobol sequence (paper Sec. 4.3) unless the spec asks for uniforms; for
 the per-Gaussian samplers pseudo-random uniforms (Sobol sequences stop at 21201 dimensions
-and bring nothing at millions). `sample_z` is the one way to draw the z of U.
+and bring nothing at millions). `sample_z` is the one way to draw the z of U; a z outside
+[-1, 1] (`Z_RANGE`, `z_in_range`) is refused by the functions of U, or makes their answer
+NaN where traced.
 
 A new kind is its maths (a z-shape function and an offsets function) and one `SamplerKind`
 entry in `KINDS`: validators, configs, checkpoints, tables and the viewer read the registry.
@@ -50,6 +52,8 @@ from mfsample.groups import GROUP_ORDER, ordered
 # Dimensions of scipy's Sobol direction numbers (Joe and Kuo).
 _SOBOL_MAX_DIM = 21201
 Z_SOURCES = ("sobol", "uniform")
+# Every kind draws z ~ U[-1, 1] entry by entry: the range of z (`z_in_range`).
+Z_RANGE = (-1.0, 1.0)
 # relu(raw) of B_hat is kept in [0, bound] (the authors' code): the centres' bound is in units
 # of the scene extent; transfer matrices as SH colour (`mfsample.lighting`).
 DEFAULT_BOUNDS = {"means": 1.0, "log_scales": 20.0, "quats": 2.0, "opacity_logits": 20.0,
@@ -308,6 +312,12 @@ def perturb(model, z):
                      f"got {z.shape}")
   deltas = spec.behaviour.offsets(signed_b_hat(model.params.b_hat, model.signs), z)
   return {g: (v + deltas[g] if g in deltas else v) for g, v in mean.items()}
+
+
+def z_in_range(z):
+  """Scalar bool (jnp, usable under jit): every entry of `z` lies in `Z_RANGE` (a NaN does
+  not). z outside it scales B_hat's spread: U of a z of 3 is 9 times U of one of 1."""
+  return jnp.all((z >= Z_RANGE[0]) & (z <= Z_RANGE[1]))
 
 
 def entry_variance(model):

@@ -26,7 +26,7 @@ import numpy as np
 
 from mfsample import arg_checks, samplers
 from mfsample.camera import Camera
-from mfsample.model import Model, sample
+from mfsample.model import Model, check_model, sample
 from mfsample.renderer import TileStats, render
 from mfsample.renderer.budget import render_with_budget
 from mfsample.renderer.settings import RenderSettings
@@ -87,24 +87,83 @@ def uncertainty_of_samples(gaussians_m, camera: Camera, *, settings: RenderSetti
 
 def check_z(model, z, sync=False):
   """Checks z for U: shape `[M >= 1, *z_shape(model)]` always (M = 0 would be a mean over no
-  samples, NaN); finite when on the host, or a JAX array with `sync` (a NaN row makes every
-  Gaussian of that sample non-finite, the renderer culls them and U would come out finite
-  and wrong: the jitted functions make it NaN instead)."""
+  samples, NaN); when on the host, or a JAX array with `sync`, every entry finite and in
+  [-1, 1] (`samplers.Z_RANGE`; ValueError naming the sample). A NaN row makes every Gaussian
+  of that sample non-finite, the renderer culls them and U would come out finite and wrong;
+  a z of 3 scales U by 9. Traced, `inputs_ok` makes the jitted functions' U NaN instead."""
   want = samplers.z_shape(model)
   got = tuple(np.shape(z))
   if len(got) != 1 + len(want) or got[1:] != want or got[0] < 1:
     raise ValueError(f"z must have shape [M >= 1, {', '.join(map(str, want))}] (M samples for "
                      f"the {model.spec.kind} sampler, e.g. sample_z(model, 2)), got "
                      f"{list(got)}")
-  arg_checks.check_finite("z", z, axis_name="sample", sync=sync)
+  arg_checks.check_real_dtype("z", z)
+  if arg_checks.is_traced(z) or (isinstance(z, jax.Array) and not sync):
+    return
+  if isinstance(z, jax.Array) and arg_checks.concrete_bool(_z_ok, z):
+    return
+  arg_checks.check_finite("z", np.asarray(z), axis_name="sample")
+  values = np.asarray(z, np.float64).reshape(got[0], -1)
+  outside = np.any((values < samplers.Z_RANGE[0]) | (values > samplers.Z_RANGE[1]), axis=1)
+  if np.any(outside):
+    i = int(np.argmax(outside))
+    raise ValueError(f"z[{i}] (sample {i}) is outside [{samplers.Z_RANGE[0]:g}, "
+                     f"{samplers.Z_RANGE[1]:g}] (max |z| = {float(np.max(np.abs(values[i]))):g}; "
+                     f"{int(outside.sum())} of {got[0]} samples): z ~ U[-1, 1], as "
+                     "sample_z draws it")
 
 
-def check_background(background, channels=3):
-  """A concrete background must be [channels] finite numbers (traced ones: shape only)."""
+_z_ok = jax.jit(samplers.z_in_range)
+
+
+def check_background(background, channels=3, sync=False):
+  """A background colour: [channels] floats (always: an integer colour, uint8 say, is on
+  another scale); in [0, 1] when on the host, or a JAX array with `sync` (ValueError naming
+  the channel). Traced, `inputs_ok` makes the jitted functions' answer NaN instead."""
   if background is None:
     return
   arg_checks.check_shape("background", background, (channels,), "one colour")
-  arg_checks.check_finite("background", background)
+  arg_checks.check_float_dtype("background", background,
+                               "floats in [0, 1] (for 8-bit colours pass background / 255)")
+  if arg_checks.is_traced(background) or (isinstance(background, jax.Array) and not sync):
+    return
+  if isinstance(background, jax.Array) and arg_checks.concrete_bool(_background_ok,
+                                                                    background):
+    return
+  arg_checks.check_finite("background", np.asarray(background))
+  values = np.asarray(background, np.float64)
+  outside = (values < 0.0) | (values > 1.0)
+  if np.any(outside):
+    i = int(np.argmax(outside))
+    raise ValueError(f"background[{i}] = {values[i]:g} is outside [0, 1] (a colour; for 8-bit "
+                     "colours pass background / 255)")
+
+
+def background_ok(background):
+  """Scalar bool (jnp): every channel of the colour `background` lies in [0, 1]."""
+  return jnp.all((background >= 0.0) & (background <= 1.0))
+
+
+_background_ok = jax.jit(background_ok)
+
+
+def check_inputs(model, z, background=None, *, sync=False):
+  """The checks of every function of U's family (`uncertainty`, `score_cameras`, the view and
+  light optimisers, `light_gram`, ...): the model (`mfsample.model.check_model`), z
+  (`check_z`) and the background colour (`check_background`), all by one rule: concrete
+  values (on the host, or on the device with `sync`) raise naming the argument; traced ones
+  make the answer NaN (`inputs_ok`)."""
+  check_model(model, sync=sync)
+  check_z(model, z, sync=sync)
+  check_background(background, sync=sync)
+
+
+def inputs_ok(model, z, background=None):
+  """Scalar bool (jnp, usable under jit): the values `check_inputs` checks are valid. The
+  jitted part of each function makes its answer NaN where it is False
+  (`arg_checks.nan_unless`), so a value that could not raise gives NaN, never a finite U."""
+  ok = model.valid & samplers.z_in_range(z)
+  return ok if background is None else ok & background_ok(background)
 
 
 def uncertainty(model: Model, camera: Camera, z: jax.Array, *,
@@ -125,11 +184,13 @@ def uncertainty(model: Model, camera: Camera, z: jax.Array, *,
     num_devices: devices to split the M samples over (static).
 
   Returns:
-    `Uncertainty`; U and the map are NaN when z holds a non-finite value (a numpy z raises
-    `ValueError` naming the sample instead).
+    `Uncertainty`; U and the map are NaN when the model is not valid (`Model.valid`: a
+    non-finite parameter, B_hat above its bound), z holds a value outside [-1, 1] (or NaN),
+    or the background one outside [0, 1]. It does not synchronise, so only host values
+    raise (a numpy z or background: `ValueError` naming the sample or channel);
+    `model.validate()` names what is wrong with a model.
   """
-  check_z(model, z)
-  check_background(background)
+  check_inputs(model, z, background)
   num_devices = arg_checks.check_int("num_devices", num_devices, minimum=1,
                                      maximum=jax.device_count())
   return _uncertainty(model, camera, z, settings=settings, background=background,
@@ -142,7 +203,7 @@ def _uncertainty(model, camera, z, *, settings, background, num_devices):
     background = jnp.zeros((3,), model.params.mean["means"].dtype)
   u = uncertainty_of_samples(sample_gaussians(model, z), camera, settings=settings,
                              background=background, num_devices=num_devices)
-  ok = arg_checks.all_finite(z)
+  ok = inputs_ok(model, z, background)
   return u._replace(value=arg_checks.nan_unless(ok, u.value),
                     pixel_map=arg_checks.nan_unless(ok, u.pixel_map))
 
@@ -175,7 +236,7 @@ def _score(model, cameras, z, background, *, settings, chunk_size, num_devices, 
 
   values, maps, stats = map_cameras(one, cameras, gaussians_m, chunk_size=chunk_size,
                                     num_devices=num_devices)
-  ok = arg_checks.all_finite(z)  # (traced z cannot raise: NaN scores, never finite ones)
+  ok = inputs_ok(model, z, background)  # (traced values cannot raise: NaN, never finite)
   values = arg_checks.nan_unless(ok, values)
   maps = None if maps is None else arg_checks.nan_unless(ok, maps)
   return CameraScores(values, maps, stats)
@@ -201,13 +262,16 @@ def score_cameras(model, cameras: Camera, z, *, settings: RenderSettings, backgr
 
   Returns:
     (`CameraScores`, the settings that sufficed).
+
+  Raises:
+    ValueError: an argument out of its range, named: it synchronises anyway, so a model,
+      z or background on the device is checked too (`check_inputs`).
   """
   if not isinstance(cameras, Camera) or len(cameras.batch_shape) != 1:
     raise ValueError("score_cameras takes a Camera batched over one axis [B], got "
                      + (f"batch shape {cameras.batch_shape}" if isinstance(cameras, Camera)
                         else type(cameras).__name__))
-  check_z(model, z)
-  check_background(background)
+  check_inputs(model, z, background, sync=True)
   chunk_size = arg_checks.check_int("chunk_size", chunk_size, minimum=1)
   max_budget = arg_checks.check_int("max_budget", max_budget, minimum=1)
   if background is None:

@@ -7,6 +7,7 @@ import pytest
 from conftest import float64
 
 from mfsample import Camera
+from mfsample.camera import InvalidCameraError
 
 UP = jnp.array([0.0, 0.0, 1.0])
 
@@ -96,3 +97,44 @@ def test_invalid_sizes_raise(width, height):
 def test_bad_matrix_shape_raises():
   with pytest.raises(ValueError, match="4, 4"):
     Camera.create(jnp.eye(3), 1.0, 1.0, 0.0, 0.0, 4, 4)
+
+
+# ---------------------------------------------------------------------- far cameras
+
+
+@pytest.mark.parametrize("eye, target, message", [
+    ([1e20, 0.0, 0.0], [0.0, 0.0, 0.0], r"eye is out of range \(a coordinate of magnitude "
+                                        r"1e\+20\); positions must lie within 1e\+18"),
+    ([0.0, 0.0, -3e19], [0.0, 0.0, 0.0], r"eye is out of range \(a coordinate of magnitude 3e\+19"),
+    ([3.0, 0.0, 1.0], [0.0, 1e20, 0.0], "target is out of range"),
+    ([[3.0, 0.0, 1.0], [0.0, 5e18, 0.0]], [0.0, 0.0, 0.0], "eye is out of range"),
+    ([np.inf, 0.0, 0.0], [0.0, 0.0, 0.0], r"eye has non-finite entries \(\[inf, 0.0, 0.0\]\)"),
+    ([3.0, 0.0, 1.0], [np.nan, 0.0, 0.0], "target has non-finite entries"),
+])
+def test_a_far_eye_or_target_is_out_of_range_not_a_non_rigid_rotation(eye, target, message):
+  """At 1e20 float32 squares of the distance overflow, the rotation came out zero, and the
+  error spoke of a non-rigid pose."""
+  with pytest.raises(InvalidCameraError, match=message) as error:
+    Camera.look_at(np.array(eye), np.array(target), np.array([0.0, 0.0, 1.0]), 0.8, 8, 8)
+  assert "rigid" not in str(error.value)
+
+
+def test_far_translations_are_out_of_range_in_every_constructor_and_invalid_under_jit():
+  w2c = np.eye(4)
+  w2c[0, 3] = 1e20
+  with pytest.raises(InvalidCameraError, match=r"world_to_camera has the translation "
+                                               r"\[1e\+20, 0, 0\], out of range"):
+    Camera.create(w2c, 8.0, 8.0, 4.0, 4.0, 8, 8)
+  c2w = np.eye(4)
+  c2w[2, 3] = -2e19
+  with pytest.raises(InvalidCameraError, match="out of range"):
+    Camera.from_blender(c2w, 0.8, 8, 8)
+  flags = jax.jit(lambda m: Camera(m, jnp.full(2, 8.0), jnp.full(2, 8.0), jnp.full(2, 4.0),
+                                   jnp.full(2, 4.0), 8, 8).valid)
+  near = np.eye(4)
+  near[2, 3] = 1e17  # within the limit: a valid, if distant, camera
+  np.testing.assert_array_equal(flags(jnp.asarray(np.stack([near, w2c]), jnp.float32)),
+                                [True, False])
+  far = Camera.look_at(np.array([1e17, 0.0, 0.0]), np.zeros(3), np.array([0.0, 0.0, 1.0]), 0.8,
+                       8, 8)
+  assert far.problems() == [] and bool(far.valid)

@@ -9,7 +9,7 @@ import pytest
 from conftest import tiny_config, tiny_start
 
 from mfsample.camera import Camera
-from mfsample.data import DatasetError, PointCloud, export_colmap, load_colmap
+from mfsample.data import DatasetError, PointCloud, Views, export_colmap, load_colmap
 from mfsample.data._io import area_downscale
 from mfsample.gaussians import Gaussians
 from mfsample.planning.poses import downscale_camera
@@ -254,3 +254,40 @@ def test_planning_pool_of_a_capture(capture):
   pool = make_pool(data_spec(config.data))
   assert len(pool.candidates) == 2 and len(pool.test) == 2 and pool.oracle is None
   assert len(pool.points) == 6 and pool.sphere.width == 64
+
+
+# ---------------------------------------------------------------------- camera parameters
+
+PINHOLE = ("fx", "fy", "cx", "cy")
+
+
+@pytest.mark.parametrize("value", [float("nan"), float("inf"), -float("inf")])
+@pytest.mark.parametrize("index", range(4))
+def test_a_non_finite_camera_parameter_is_named_in_a_binary_model(tmp_path, index, value):
+  """pycolmap's binary reader keeps a NaN parameter: the walk names the camera first."""
+  w2c = np.eye(4, dtype=np.float32)
+  w2c[2, 3] = 2.0
+  views = Views(np.zeros((2, 8, 8, 3), np.float32),
+                Camera.create(np.stack([w2c] * 2), 6.0, 6.0, 4.0, 4.0, 8, 8))
+  sparse = export_colmap(tmp_path, views)
+  data = bytearray((sparse / "cameras.bin").read_bytes())
+  data[32 + 8 * index:40 + 8 * index] = np.float64(value).tobytes()  # after id, model, w, h
+  (sparse / "cameras.bin").write_bytes(bytes(data))
+  with pytest.raises(DatasetError, match=rf"cameras\.bin: camera 1 has non-finite parameters: "
+                                         rf"{PINHOLE[index]} = {value}"):
+    load_colmap(tmp_path)
+
+
+@pytest.mark.parametrize("params, message", [
+    ("nan 60 20 15", "camera 7 has non-finite parameters: fx = nan"),
+    ("50 60 inf 15", "camera 7 has non-finite parameters: cx = inf"),
+    ("50 NaN 20 -inf", "camera 7 has non-finite parameters: fy = nan, cy = -inf"),
+    ("50 60 20", r"camera 7 \(PINHOLE\) has 3 parameters; the model has 4 \(fx, fy, cx, cy\)"),
+])
+def test_camera_parameters_of_a_text_model_are_checked_before_pycolmap(tmp_path, params,
+                                                                       message):
+  """pycolmap's text reader failed with "Check failed: camera.VerifyParams()", no camera id."""
+  _text_model(tmp_path, f"7 PINHOLE 40 30 {params}", ["1 1 0 0 0 0 0 1 7 a.png"])
+  with pytest.raises(DatasetError, match=rf"cameras\.txt line 2: {message}"):
+    load_colmap(tmp_path)
+

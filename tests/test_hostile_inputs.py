@@ -402,7 +402,8 @@ def _relightable():
 def test_under_jit_a_non_finite_z_or_light_gives_nan_never_a_finite_u():
   """Traced values cannot raise: U, its map and U(xi) are NaN (before: finite for a NaN row of
   z, exactly 0 for a NaN light), and a finite input still gives a finite U > 0. A z on the
-  device is not fetched to be checked (no sync per call): it gives NaN too."""
+  device is not fetched to be checked by `uncertainty` (no sync per call): it gives NaN too;
+  `score_cameras` synchronises anyway, so it checks it."""
   model, relit, camera = random_model("lowrank", num=8), _relightable(), _cams(1)
   u = jax.jit(lambda z: unc.uncertainty(model, camera[0], z, settings=SMALL))
   good = np.array([[0.5, -0.5], [-0.4, 0.3]], np.float32)
@@ -411,8 +412,8 @@ def test_under_jit_a_non_finite_z_or_light_gives_nan_never_a_finite_u():
   assert np.isnan(float(bad.value)) and np.all(np.isnan(bad.pixel_map))
   on_device = jnp.asarray(good * np.array([[1.0], [NAN]], np.float32))
   assert np.isnan(float(unc.uncertainty(model, camera[0], on_device, settings=SMALL).value))
-  scores, _ = unc.score_cameras(model, _cams(), on_device, settings=SMALL, num_devices=1)
-  assert np.all(np.isnan(scores.values))
+  with pytest.raises(ValueError, match=r"z\[1\] \(sample 1\) is not finite"):
+    unc.score_cameras(model, _cams(), on_device, settings=SMALL, num_devices=1)
   xi = lights.uniform_light(4)
   u_light = jax.jit(lambda x: lu.light_uncertainty(relit, camera, good, x, settings=SMALL).value)
   assert float(u_light(jnp.asarray(xi, jnp.float32))) > 0

@@ -13,6 +13,7 @@ from mfsample.data.ply import (
   export_ply,
   load_ply,
   ply_arrays,
+  read_ply_data,
   sh_degree_of,
 )
 from mfsample.groups import GROUPS
@@ -179,3 +180,78 @@ def test_gaussians_round_trip_through_raw_parameters(tmp_path):
     np.testing.assert_allclose(np.asarray(getattr(back, name))[:30],
                                np.asarray(getattr(gaussians, name)), rtol=2e-6, atol=1e-7,
                                err_msg=name)
+
+
+# ---------------------------------------------------------------------- rows and bytes
+
+
+def _declare(path, old, new):
+  """`path` with the header's element line `old` replaced by `new` (the data untouched)."""
+  data = path.read_bytes()
+  head, rest = data.split(b"end_header\n", 1)
+  assert old.encode() in head
+  path.write_bytes(head.replace(old.encode(), new.encode()) + b"end_header\n" + rest)
+  return path
+
+
+@pytest.mark.parametrize("byte_order", ["<", ">"])
+@pytest.mark.parametrize("damage, message", [
+    (lambda p: _declare(p, "element vertex 200", "element vertex 199"),
+     r"rows\.ply: 56 bytes follow the last of the 199 vertex rows the header declares \(the size "
+     r"of 1 row of 56 bytes\)"),
+    (lambda p: p.write_bytes(p.read_bytes() + b"\0" * 1000),
+     r"rows\.ply: 1000 bytes follow the last of the 200 vertex rows .*17.9 rows of 56 bytes"),
+    (lambda p: p.write_bytes(p.read_bytes() + b"\n"), r"rows\.ply: 1 bytes follow"),
+    (lambda p: _declare(p, "element vertex 200", "element vertex 20"),
+     r"rows\.ply: 10080 bytes follow the last of the 20 vertex rows"),
+    (lambda p: _declare(p, "element vertex 200", "element vertex 201"),
+     r"rows\.ply: truncated: the header declares 201 vertex rows of 56 bytes, but the data "
+     r"ends in row 200"),
+], ids=["199 of 200 rows", "1000 trailing bytes", "a trailing newline", "20 of 200 rows",
+        "201 of 200 rows"])
+def test_the_declared_rows_must_fill_the_data_exactly(tmp_path, byte_order, damage, message):
+  """Rows after the declared count were dropped without a word, trailing bytes accepted."""
+  path = _write(tmp_path / "rows.ply", _reference_columns(n=200), byte_order=byte_order)
+  assert len(load_ply(path)["means"]) == 200
+  damage(path)
+  with pytest.raises(DatasetError, match=message):
+    load_ply(path)
+
+
+def test_rows_after_an_element_of_lists_are_checked_after_reading(tmp_path):
+  """Rows of list properties vary in size: the bytes left are known once plyfile read them."""
+  table = np.empty(2, dtype=[("x", "f4"), ("y", "f4"), ("z", "f4")])
+  table["x"] = [1.0, 2.0]
+  faces = np.empty(1, dtype=[("vertex_indices", "O")])
+  faces["vertex_indices"][0] = np.array([0, 1, 0], np.int32)
+  path = tmp_path / "mesh.ply"
+  plyfile.PlyData([plyfile.PlyElement.describe(table, "vertex"),
+                   plyfile.PlyElement.describe(faces, "face")]).write(str(path))
+  assert len(read_ply_data(path)["face"].data) == 1
+  path.write_bytes(path.read_bytes() + b"\0" * 13)
+  with pytest.raises(DatasetError, match=r"mesh\.ply: 13 bytes follow the last of the 1 face "
+                                         "rows the header declares"):
+    read_ply_data(path)
+
+
+@pytest.mark.parametrize("change, message", [
+    (lambda p: _declare(p, "element vertex 5", "element vertex 4"),
+     r"text\.ply: the header declares 4 rows \(4 vertex\), but the data holds 5 lines .*its "
+     "counts do not match the data"),
+    (lambda p: p.write_bytes(p.read_bytes() + b"1 2 3 4 5 6 7 8 9 10 11 12 13 14\n"),
+     r"declares 5 rows \(5 vertex\), but the data holds 6 lines"),
+    (lambda p: _declare(p, "element vertex 5", "element vertex 100000000000"),
+     r"declares 100000000000 rows .* holds 5 lines .*: truncated"),
+], ids=["4 of 5 rows", "a line after the rows", "10^11 rows declared"])
+def test_ascii_files_hold_one_line_per_declared_row(tmp_path, change, message):
+  """Where ASCII is read (point clouds), the same rule: every row, and nothing after; a count
+  of 10^11 is refused before plyfile allocates it. 3DGS models refuse ASCII at once."""
+  path = _write(tmp_path / "text.ply", _reference_columns(n=5), text=True)
+  assert len(read_ply_data(path, allow_ascii=True)["vertex"].data) == 5
+  path.write_bytes(path.read_bytes() + b"\n\n")  # blank lines at the end are no rows
+  assert len(read_ply_data(path, allow_ascii=True)["vertex"].data) == 5
+  change(path)
+  with pytest.raises(DatasetError, match=message):
+    read_ply_data(path, allow_ascii=True)
+  with pytest.raises(DatasetError, match=r"text\.ply: ASCII PLY"):
+    load_ply(path)

@@ -40,6 +40,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from mfsample import arg_checks
 from mfsample.camera import Camera
 from mfsample.data import _io, colmap_files
 from mfsample.data.views import Views
@@ -68,6 +69,29 @@ class PointCloud(NamedTuple):
 
   def __len__(self):
     return len(self.xyz)
+
+  def validate(self, name="points"):
+    """Raises ValueError naming `name` unless xyz and rgb are [P, 3], xyz finite and rgb
+    floats in [0, 1]; returns the cloud. Colours on another scale are refused, not clipped:
+    8-bit (0..255) or 16-bit integers, or floats written in 0..255, would all clip to white."""
+    arg_checks.check_real_dtype(f"{name}.xyz", self.xyz)
+    arg_checks.check_real_dtype(f"{name}.rgb", self.rgb)
+    xyz, rgb = np.asarray(self.xyz, np.float64), np.asarray(self.rgb)
+    if xyz.ndim != 2 or xyz.shape[1] != 3 or rgb.shape != xyz.shape:
+      raise ValueError(f"{name} must hold xyz [P, 3] and rgb [P, 3], got {list(xyz.shape)} "
+                       f"and {list(rgb.shape)}")
+    bad = ~np.all(np.isfinite(xyz), axis=-1)
+    if np.any(bad):
+      raise ValueError(f"{name}.xyz[{int(np.argmax(bad))}] is not finite")
+    arg_checks.check_float_dtype(f"{name}.rgb", rgb, "floats in [0, 1] (for 8-bit colours "
+                                 "pass rgb / 255, for 16-bit rgb / 65535)")
+    outside = np.any(~((rgb >= 0.0) & (rgb <= 1.0)), axis=-1)
+    if np.any(outside):
+      i = int(np.argmax(outside))
+      raise ValueError(f"{name}.rgb[{i}] = {rgb[i].tolist()} is outside [0, 1] "
+                       f"({int(outside.sum())} of {len(rgb)} points; colours given in 0..255 "
+                       "must be divided by 255)")
+    return self
 
   def box(self, percentile=1.0):
     """(low [3], high [3]) of the points between the `percentile` and 100 - `percentile`
@@ -322,13 +346,7 @@ def export_colmap(path, views: Views, points: PointCloud | None = None, *, binar
     raise FileExistsError(f"{sparse} holds a model; pass overwrite=True to replace it.")
   views.validate()
   if points is not None:
-    xyz, rgb = np.asarray(points.xyz, np.float64), np.asarray(points.rgb, np.float64)
-    if xyz.ndim != 2 or xyz.shape[1] != 3 or rgb.shape != xyz.shape:
-      raise ValueError(f"points must hold xyz [P, 3] and rgb [P, 3], got {list(xyz.shape)} "
-                       f"and {list(rgb.shape)}")
-    bad = ~np.all(np.isfinite(xyz), axis=-1)
-    if np.any(bad):
-      raise ValueError(f"points.xyz[{int(np.argmax(bad))}] is not finite")
+    PointCloud(*points).validate()
   images = np.asarray(views.images, np.float32)
   cameras = views.cameras
   (root / "images").mkdir(parents=True, exist_ok=True)
@@ -355,7 +373,7 @@ def export_colmap(path, views: Views, points: PointCloud | None = None, *, binar
     pose = pycolmap.Rigid3d(pycolmap.Rotation3d(w2c[i, :3, :3]), w2c[i, :3, 3])
     recon.add_image_with_trivial_frame(image, pose)
   if points is not None:
-    rgb = np.round(np.clip(np.asarray(points.rgb, np.float64), 0.0, 1.0) * 255.0)
+    rgb = np.round(np.asarray(points.rgb, np.float64) * 255.0)
     for xyz, color in zip(np.asarray(points.xyz, np.float64), rgb.astype(np.uint8),
                           strict=True):
       recon.add_point3D(xyz, pycolmap.Track(), color)

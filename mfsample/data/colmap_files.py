@@ -15,13 +15,16 @@ and the field:
   model has. The walk reads a few integers per record (`struct.unpack_from` on a memory
   map), so it costs a fraction of pycolmap's own reading.
 * text files: image names without spaces, images referring to known cameras, colours in
-  0..255.
+  0..255, as many camera parameters as the camera model has.
+* in both: camera parameters must be finite (pycolmap's text reader fails without naming
+  the camera; its binary reader keeps a NaN focal length).
 
 The layouts are COLMAP's documented ones (little-endian; `doc/format.rst` and
 `src/colmap/scene/reconstruction_io_binary.cc` of COLMAP).
 """
 
 import functools
+import math
 import mmap
 import struct
 from pathlib import Path
@@ -43,7 +46,7 @@ _DATA_ID = 4 + 4 + 8  # sensor type i32, sensor id u32, data id u64
 
 @functools.cache
 def camera_model_params():
-  """{COLMAP camera model id: number of parameters}, from pycolmap (what it will read)."""
+  """{COLMAP camera model id: its parameters' names}, from pycolmap (what it will read)."""
   import pycolmap
 
   out = {}
@@ -51,8 +54,17 @@ def camera_model_params():
     if int(model) < 0:
       continue
     camera = pycolmap.Camera(model=model, width=1, height=1)
-    out[int(model)] = len(camera.params_info.split(","))
+    out[int(model)] = tuple(name.strip() for name in camera.params_info.split(","))
   return out
+
+
+@functools.cache
+def camera_model_ids():
+  """{COLMAP camera model name: its id}, from pycolmap."""
+  import pycolmap
+
+  return {name: int(model) for name, model in pycolmap.CameraModelId.__members__.items()
+          if int(model) >= 0}
 
 
 def check_model_files(sparse):
@@ -147,7 +159,9 @@ def _walk_cameras(path):
       if model_id not in params:
         raise DatasetError(f"{path}: camera {camera_id} has the model id {model_id}, which "
                            f"COLMAP does not define (known: 0..{max(params)}).")
-      w.skip(8 * params[model_id], f"the {params[model_id]} parameters of camera {camera_id}")
+      names = params[model_id]
+      values = w.read(f"<{len(names)}d", f"the {len(names)} parameters of camera {camera_id}")
+      _check_params(path, camera_id, names, values if len(names) > 1 else (values,))
       ids.add(camera_id)
     w.end("cameras")
     return ids
@@ -242,10 +256,34 @@ def _data_lines(path):
 
 
 def _scan_cameras_text(path):
+  """Camera ids; each camera's parameters must be as many as its model has, and finite."""
+  params = {name: camera_model_params()[model] for name, model in camera_model_ids().items()}
   ids = set()
-  for _, line in _data_lines(path):
-    ids.add(line.split(maxsplit=1)[0])
+  for number, line in _data_lines(path):
+    fields = line.split()
+    ids.add(fields[0])
+    if len(fields) < 4 or fields[1] not in params:
+      continue  # pycolmap reports lines it cannot parse
+    where, names = f"{path} line {number}", params[fields[1]]
+    if len(fields) - 4 != len(names):
+      raise DatasetError(f"{where}: camera {fields[0]} ({fields[1]}) has {len(fields) - 4} "
+                         f"parameters; the model has {len(names)} ({', '.join(names)}).")
+    try:
+      values = [float(v) for v in fields[4:]]
+    except ValueError:
+      continue  # pycolmap reports lines it cannot parse
+    _check_params(where, fields[0], names, values)
   return ids
+
+
+def _check_params(where, camera_id, names, values):
+  """COLMAP camera parameters must be finite: pycolmap's text reader fails in "VerifyParams"
+  without naming the camera, and its binary reader keeps a NaN focal length."""
+  bad = [f"{name} = {value}" for name, value in zip(names, values, strict=True)
+         if not math.isfinite(value)]
+  if bad:
+    raise DatasetError(f"{where}: camera {camera_id} has non-finite parameters: "
+                       f"{', '.join(bad)}.")
 
 
 def _scan_images_text(path, camera_ids):

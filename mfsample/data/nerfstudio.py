@@ -291,13 +291,17 @@ def _frame_names(root, file_paths):
 
 def read_points(path):
   """The `PointCloud` of a point-cloud .ply (ASCII, as ns-process-data writes it, or binary):
-  float x, y, z and optional red, green, blue (8-bit, or floats in [0, 1]; grey without)."""
-  from mfsample.data.ply import _plyfile
+  float x, y, z and optional red, green, blue (grey without), read in full (`ply.read_ply_data`).
+  Integer colours are scaled by their type's range (uchar 0..255, ushort 0..65535); float
+  colours must lie in [0, 1] (floats in 0..255 are refused, naming the property, not clipped
+  to white)."""
+  from mfsample.data.ply import read_ply_data
 
-  plyfile = _plyfile()
   path = _io.require_file(path, "point cloud (ply_file_path)")
   try:
-    data = plyfile.PlyData.read(str(path))
+    data = read_ply_data(path, allow_ascii=True, what="point cloud (ply_file_path)")
+  except _io.DatasetError:
+    raise
   except Exception as e:  # plyfile raises its own types for malformed files
     raise _io.DatasetError(f"{path}: cannot be read as a PLY file ({e}).") from e
   if "vertex" not in [e.name for e in data.elements]:
@@ -312,12 +316,28 @@ def read_points(path):
   if not np.all(np.isfinite(xyz)):
     raise _io.DatasetError(f"{path}: non-finite point coordinates.")
   if all(c in names for c in ("red", "green", "blue")):
-    rgb = np.stack([np.asarray(vertex[c], np.float64) for c in ("red", "green", "blue")], -1)
-    if np.issubdtype(vertex["red"].dtype, np.integer):
-      rgb = rgb / 255.0
+    rgb = np.stack([_colour(vertex[c], c, path) for c in ("red", "green", "blue")], -1)
   else:
     rgb = np.full_like(xyz, 0.5)
-  return PointCloud(xyz.astype(np.float32), np.clip(rgb, 0.0, 1.0).astype(np.float32))
+  return PointCloud(xyz.astype(np.float32), rgb.astype(np.float32))
+
+
+def _colour(values, name, path):
+  """[P] float64 in [0, 1] of one colour property; DatasetError naming it otherwise."""
+  dtype = values.dtype
+  if np.issubdtype(dtype, np.integer):
+    if np.any(values < 0):
+      raise _io.DatasetError(f"{path}: vertex property {name} holds negative colours "
+                             f"(type {dtype}).")
+    return np.asarray(values, np.float64) / float(np.iinfo(dtype).max)
+  values = np.asarray(values, np.float64)
+  outside = ~((values >= 0.0) & (values <= 1.0))
+  if np.any(outside):
+    i = int(np.argmax(outside))
+    raise _io.DatasetError(f"{path}: vertex property {name} = {values[i]:g} in row {i} is "
+                           f"outside [0, 1] ({int(outside.sum())} rows): float colours are in "
+                           "[0, 1] (8-bit colours are stored as uchar).")
+  return values
 
 
 # ------------------------------------------------------------------------- writing
@@ -402,6 +422,8 @@ def export_nerfstudio(path, views: Views, points: PointCloud | None = None, *,
   applied = None
   if applied_transform is not None:
     applied = _io.validate_rigid(applied_transform, "applied_transform", "applied_transform")
+  if points is not None:  # before anything is written; colours are refused, not clipped
+    PointCloud(*points).validate()
   stems = []
   for i in range(len(images)):
     stem = f"{i:05d}"
@@ -427,7 +449,7 @@ def export_nerfstudio(path, views: Views, points: PointCloud | None = None, *,
                                       ("red", "u1"), ("green", "u1"), ("blue", "u1")])
     for j, c in enumerate("xyz"):
       table[c] = xyz[:, j]
-    rgb = np.round(np.clip(np.asarray(points.rgb, np.float64), 0.0, 1.0) * 255.0)
+    rgb = np.round(np.asarray(points.rgb, np.float64) * 255.0)
     for j, c in enumerate(("red", "green", "blue")):
       table[c] = rgb[:, j]
     plyfile = _plyfile()

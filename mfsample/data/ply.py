@@ -21,8 +21,11 @@ Reading accepts any SH degree 0-3 (told by the number of `f_rest_*` properties),
 in any order and of any float type, big- or little-endian data, and ignores properties it does
 not use (normals, colours of point-cloud tools, extra per-Gaussian data). It refuses, naming
 the file and the property: missing properties, an `f_rest` count that is no SH degree,
-non-finite values, truncated data, and ASCII files (3DGS tools write binary; an ASCII file of
-a real model is gigabytes of text, and far more often a mesh or point cloud saved by mistake).
+non-finite values, truncated data, data after the rows the header declares (a count too
+small: the rows after it would be dropped without a word), and ASCII files (3DGS tools write
+binary; an ASCII file of a real model is gigabytes of text, and far more often a mesh or
+point cloud saved by mistake). `read_ply_data` is the reader every `.ply` goes through
+(point clouds too, where ASCII is allowed): a file is read in full or refused.
 """
 
 from pathlib import Path
@@ -148,29 +151,58 @@ def export_gaussians(path, gaussians):
 # ------------------------------------------------------------------------- reading
 
 
-def read_vertex_table(path):
-  """The `vertex` element of a binary PLY file as a numpy structured array.
+def read_ply_data(path, *, allow_ascii=False, what=".ply file"):
+  """A PLY file as `plyfile.PlyData`, read in full: every row the header declares, and
+  nothing after them.
+
+  Args:
+    path: the file.
+    allow_ascii: read ASCII files too (point clouds); a 3DGS model is binary.
+    what: the file's role, for the message of a missing file.
 
   Raises:
     FileNotFoundError: no file at `path`.
-    DatasetError: not a PLY file, ASCII format, no `vertex` element, list properties or
-      truncated data (the message names the file, and the row and property where known).
+    DatasetError: not a PLY file, ASCII format (unless allowed), truncated data, or data
+      after the rows the header declares (the message names the file, and the element, row
+      and property where known).
   """
-  path = require_file(path, ".ply file")
+  path = require_file(path, what)
   plyfile = _plyfile()
-  _check_header(path)
+  size = _check_header(path, allow_ascii)
   try:
-    # mmap=False: the data is copied (memory maps of a file stay open), and a truncated
-    # file is reported with the row and property where the data ends.
-    data = plyfile.PlyData.read(str(path), mmap=False)
+    with open(path, "rb") as f:
+      # mmap=False: the data is copied (memory maps of a file stay open), and a truncated
+      # file is reported with the row and property where the data ends.
+      data = plyfile.PlyData.read(f, mmap=False)
+      end = None if data.text else f.tell()
   except plyfile.PlyHeaderParseError as e:
     raise DatasetError(f"{path}: not a valid PLY header ({e}).") from e
   except plyfile.PlyElementParseError as e:
     raise DatasetError(f"{path}: truncated or malformed data: {e}.") from e
   except (UnicodeDecodeError, ValueError) as e:
     raise DatasetError(f"{path}: cannot be read as a PLY file ({e}).") from e
-  if data.text:
+  if data.text and not allow_ascii:
     raise DatasetError(_ASCII_MESSAGE.format(path=path))
+  if end is not None and end < size:  # rows of varying size (lists): known once read
+    last = data.elements[-1] if data.elements else None
+    raise DatasetError(f"{path}: {size - end} bytes follow the last of the "
+                       f"{last.count if last else 0} {last.name if last else ''} rows the "
+                       "header declares: its counts do not match the data, or the file is "
+                       "corrupt.")
+  return data
+
+
+def read_vertex_table(path):
+  """The `vertex` element of a binary PLY file as a numpy structured array.
+
+  Raises:
+    FileNotFoundError: no file at `path`.
+    DatasetError: not a PLY file, ASCII format, no `vertex` element, list properties,
+      truncated data or data after the declared rows (`read_ply_data`; the message names the
+      file, and the row and property where known).
+  """
+  plyfile = _plyfile()
+  data = read_ply_data(path)
   names = [e.name for e in data.elements]
   if "vertex" not in names:
     raise DatasetError(f"{path}: no 'vertex' element (elements: {', '.join(names) or 'none'}).")
@@ -191,13 +223,17 @@ _SCALAR_BYTES = {"char": 1, "int8": 1, "uchar": 1, "uint8": 1, "short": 2, "int1
 _MAX_HEADER = 1 << 20
 
 
-def _check_header(path):
-  """Checks what the header declares against the file before plyfile reads it.
+def _check_header(path, allow_ascii=False):
+  """Checks what the header declares against the file before plyfile reads it; returns the
+  file's size in bytes.
 
   plyfile allocates the rows an element declares before reading them, so a header that
-  declares 10^11 vertices (a corrupt count, or a file cut short) asks for terabytes. Here an
-  ASCII file is refused at once, and the scalar elements up to the first one with a list
-  property must fit in the data that follows the header. Headers this simple parser does not
+  declares 10^11 vertices (a corrupt count, or a file cut short) asks for terabytes; and it
+  stops after the declared rows, so a count too small drops the rows after it without a
+  word. Here an ASCII file is refused at once (unless allowed: then it must hold exactly one
+  line per declared row), and binary elements of scalar properties must fill the data that
+  follows the header exactly, up to the first element with a list property (rows of varying
+  size, checked after reading: `read_ply_data`). Headers this simple parser does not
   understand are left to plyfile, which reports them.
   """
   with open(path, "rb") as f:
@@ -205,16 +241,19 @@ def _check_header(path):
     size = f.seek(0, 2)
   end = head.find(b"end_header")
   if not head.startswith(b"ply") or end < 0:
-    return
+    return size
   newline = head.find(b"\n", end)
   if newline < 0:
-    return
+    return size
   lines = head[:end].decode("ascii", "replace").splitlines()
   elements = []  # [name, count, [(property, bytes)], whether it has a list property]
+  text = False
   for line in lines[1:]:
     words = line.split()
     if words[:1] == ["format"] and words[1:2] == ["ascii"]:
-      raise DatasetError(_ASCII_MESSAGE.format(path=path))
+      if not allow_ascii:
+        raise DatasetError(_ASCII_MESSAGE.format(path=path))
+      text = True
     if words[:1] == ["element"] and len(words) == 3 and words[2].isdigit():
       elements.append([words[1], int(words[2]), [], False])
     elif words[:1] == ["property"] and elements:
@@ -224,7 +263,10 @@ def _check_header(path):
       elif len(words) == 3 and words[1] in _SCALAR_BYTES:
         elements[-1][2].append((words[2], _SCALAR_BYTES[words[1]]))
       else:
-        return  # a header plyfile will report
+        return size  # a header plyfile will report
+  if text:
+    _check_text_rows(path, newline + 1, elements)
+    return size
   left = size - (newline + 1)
   for name, count, properties, has_list in elements:
     row = sum(b for _, b in properties)  # the exact row size, or a lower bound with lists
@@ -235,8 +277,32 @@ def _check_header(path):
                          f"{'at least ' if has_list else ''}{row} bytes, but the data ends "
                          f"in row {r}, at property {at!r} ({left} bytes of data).")
     if has_list:
-      return  # rows vary in size from here on: plyfile reads them one by one
+      return size  # rows vary in size from here on: plyfile reads them one by one
     left -= count * row
+  if left > 0 and elements:
+    name, count, properties, _ = elements[-1]
+    row = sum(b for _, b in properties)
+    rows = (f" (the size of {left / row:.3g} row{'' if left == row else 's'} of {row} bytes)"
+            if row else "")
+    raise DatasetError(f"{path}: {left} bytes follow the last of the {count} {name} rows the "
+                       f"header declares{rows}: its counts do not match the data, or the "
+                       "file is corrupt.")
+  return size
+
+
+def _check_text_rows(path, start, elements):
+  """An ASCII PLY holds one line per row (plyfile reads them so): the non-blank lines after
+  the header must number the rows the header declares."""
+  with open(path, "rb") as f:
+    f.seek(start)
+    found = sum(1 for line in f if line.strip())
+  declared = sum(count for _, count, _, _ in elements)
+  if found != declared:
+    counts = ", ".join(f"{count} {name}" for name, count, _, _ in elements) or "none"
+    raise DatasetError(f"{path}: the header declares {declared} rows ({counts}), but the "
+                       f"data holds {found} lines (an ASCII PLY holds one line per row): "
+                       + ("truncated." if found < declared else "its counts do not match the "
+                          "data, or the file is corrupt."))
 
 
 def _ends(properties):

@@ -31,7 +31,7 @@ from mfsample.lighting import uncertainty as lu
 from mfsample.renderer.budget import BudgetExceededError
 from mfsample.renderer.settings import RenderSettings
 from mfsample.sharding import default_num_devices
-from mfsample.view_uncertainty import check_z
+from mfsample.view_uncertainty import check_inputs
 
 
 @dataclasses.dataclass(frozen=True)
@@ -123,7 +123,7 @@ def ascend(model, cameras, z, xi0, *, opt: AscentSettings, settings: RenderSetti
   """
   _, n = lu._check_model(model)
   lu.check_cameras(cameras)
-  check_z(model, z, sync=True)  # called once, it syncs anyway
+  check_inputs(model, z, sync=True)  # called once, it syncs anyway
   xi0 = lights_lib.on_sphere(lights_lib.check_light(xi0, n, "xi0"), opt.norm)
   dtype = model.params.mean["means"].dtype
   num_devices = default_num_devices(cameras.batch_shape[0])

@@ -37,7 +37,7 @@ from mfsample.renderer.budget import render_with_budget
 from mfsample.renderer.settings import RenderSettings
 from mfsample.renderer.tiles import TileStats
 from mfsample.sharding import default_num_devices, map_cameras
-from mfsample.view_uncertainty import check_z, pixel_variance
+from mfsample.view_uncertainty import check_inputs, inputs_ok, pixel_variance
 
 
 class LightUncertainty(NamedTuple):
@@ -86,7 +86,7 @@ def check_cameras(cameras):
 
 def _check_xi(xi, n):
   """Shape check always; finiteness only for concrete values (not under jit or grad: there a
-  non-finite light gives NaN, `_nan_unless_finite`)."""
+  non-finite light gives NaN, `_nan_unless_valid`)."""
   if isinstance(xi, jax.core.Tracer):
     if tuple(xi.shape) != (n,):
       raise ValueError(f"xi must be one SH light of {n} coefficients (shape [{n}]), got "
@@ -95,10 +95,13 @@ def _check_xi(xi, n):
   return jnp.asarray(lights_lib.check_light(xi, n))
 
 
-def _nan_unless_finite(x, *inputs):
-  """x, or NaN when an input is not finite. A NaN light (or z) makes every Gaussian's
-  radiance non-finite; the renderer culls them, and without this U would be exactly 0."""
-  ok = functools.reduce(jnp.logical_and, [arg_checks.all_finite(v) for v in inputs])
+def _nan_unless_valid(x, model, z, xi=None):
+  """x, or NaN unless the model, z (`mfsample.view_uncertainty.inputs_ok`) and the light are
+  valid. A NaN light (or z, or Gaussian) makes radiances non-finite; the renderer culls
+  those Gaussians, and without this U would be finite (exactly 0 for a NaN light)."""
+  ok = inputs_ok(model, z)
+  if xi is not None:
+    ok = ok & arg_checks.all_finite(xi)
   return arg_checks.nan_unless(ok, x)
 
 
@@ -116,7 +119,7 @@ def _light_uncertainty(model, cameras, z, xi, *, settings, num_devices):
     return jnp.sum(pixel_variance(rgbs)), stats
 
   values, stats = map_cameras(one, cameras, raw_m, num_devices=num_devices)
-  values = _nan_unless_finite(values, xi, z)
+  values = _nan_unless_valid(values, model, z, xi)
   return LightUncertainty(jnp.sum(values), values, stats)
 
 
@@ -135,11 +138,12 @@ def light_uncertainty(model, cameras, z, xi, *, settings: RenderSettings, num_de
     num_devices: devices to shard the cameras over (static).
 
   Returns:
-    `LightUncertainty`.
+    `LightUncertainty`; NaN where the model is not valid (`Model.valid`) or z is outside
+    [-1, 1] (not synchronising, it raises only for host values, as `mfsample.uncertainty`).
   """
   _, n = _check_model(model)
   check_cameras(cameras)
-  check_z(model, z)
+  check_inputs(model, z)
   num_devices = arg_checks.check_int("num_devices", num_devices, minimum=1,
                                      maximum=jax.device_count())
   return _light_uncertainty(model, cameras, z, _check_xi(xi, n), settings=settings,
@@ -152,7 +156,7 @@ def light_pixel_map(model, camera, z, xi, *, settings: RenderSettings):
   the variance over the M samples of the radiance under xi, summed over RGB (the uncertainty
   image of Eq. 10 under the light xi; its sum is that camera's share of U(xi))."""
   _, n = _check_model(model)
-  check_z(model, z)
+  check_inputs(model, z)
   xi = _check_xi(xi, n).astype(model.params.mean["means"].dtype)
 
   def sample(raw):
@@ -160,8 +164,8 @@ def light_pixel_map(model, camera, z, xi, *, settings: RenderSettings):
     return out.rgb, out.stats
 
   rgbs, stats = jax.lax.map(sample, sample_raw(model, z))
-  return (_nan_unless_finite(pixel_variance(rgbs), xi, z),
-          _nan_unless_finite(jnp.mean(rgbs, axis=0), xi, z), stats)
+  return (_nan_unless_valid(pixel_variance(rgbs), model, z, xi),
+          _nan_unless_valid(jnp.mean(rgbs, axis=0), model, z, xi), stats)
 
 
 def light_uncertainty_fitted(model, cameras, z, xi, *, settings: RenderSettings,
@@ -170,7 +174,7 @@ def light_uncertainty_fitted(model, cameras, z, xi, *, settings: RenderSettings,
   until no render overflows (never a truncated image)."""
   _, n = _check_model(model)
   check_cameras(cameras)
-  check_z(model, z)
+  check_inputs(model, z, sync=True)  # it synchronises anyway
   max_budget = arg_checks.check_int("max_budget", max_budget, minimum=1)
   xi = _check_xi(xi, n)
   return render_with_budget(_light_uncertainty, settings, model, cameras, z, xi,
@@ -192,7 +196,7 @@ def _light_gram(model, cameras, z, *, settings, num_devices):
     return jnp.einsum("mhwbc,mhwdc->bd", d, d) / images.shape[0], stats
 
   per_camera, stats = map_cameras(one, cameras, raw_m, num_devices=num_devices)
-  per_camera = _nan_unless_finite(per_camera, z)
+  per_camera = _nan_unless_valid(per_camera, model, z)
   q = jnp.sum(per_camera, axis=0)
   return LightGram(0.5 * (q + q.T), per_camera, stats)
 
@@ -214,7 +218,7 @@ def light_gram(model, cameras, z, *, settings: RenderSettings, max_budget=1 << 2
   """
   _check_model(model)
   check_cameras(cameras)
-  check_z(model, z)
+  check_inputs(model, z, sync=True)  # it synchronises anyway
   max_budget = arg_checks.check_int("max_budget", max_budget, minimum=1)
   if num_devices is None:
     num_devices = default_num_devices(cameras.batch_shape[0])

@@ -36,8 +36,8 @@ from mfsample.renderer.budget import render_with_budget
 from mfsample.renderer.settings import RenderSettings
 from mfsample.sharding import default_num_devices
 from mfsample.view_uncertainty import (
-    check_background,
-    check_z,
+    check_inputs,
+    inputs_ok,
     sample_gaussians,
     uncertainty_of_samples,
 )
@@ -69,7 +69,9 @@ class OptimizeSettings:
   def __post_init__(self):
     sc.check_int("OptimizeSettings.steps", self.steps, minimum=1)
     sc.check_int("OptimizeSettings.z_drop_step", self.z_drop_step, minimum=0)
-    sc.check_float("OptimizeSettings.z_drop_scale", self.z_drop_scale, minimum=0.0)
+    # At most 1: a scaled z must stay in z's range [-1, 1].
+    sc.check_float("OptimizeSettings.z_drop_scale", self.z_drop_scale, minimum=0.0,
+                   maximum=1.0)
     for name in ("lr", "se3_lr_rotation", "se3_lr_translation"):
       # 0 is allowed: the pose stays where selection put it (the optimiser's ablation).
       sc.check_float(f"OptimizeSettings.{name}", getattr(self, name), minimum=0.0)
@@ -125,6 +127,10 @@ def _run(model, params0, z, key, background, camera_fn, project, optimizer, opt,
   (params, _), (values, traj, num_padded, overflow) = jax.lax.scan(
       step, init, (jnp.arange(opt.steps), _z_scales(opt, z.dtype)))
   trajectory = jnp.concatenate([traj, params[None]], axis=0)
+  # Values that could not raise (traced): a NaN pose and U, never a plausible ascent.
+  ok = inputs_ok(model, z, background)
+  params, values, trajectory = (arg_checks.nan_unless(ok, x) for x in (params, values,
+                                                                      trajectory))
   return params, values, trajectory, jnp.max(num_padded), jnp.any(overflow)
 
 
@@ -190,8 +196,7 @@ class _Overflow(NamedTuple):
 
 def _check_common(model, z, background, num_devices, max_budget):
   """(background [3], number of devices) after checking the arguments both optimisers take."""
-  check_z(model, z, sync=True)  # called once, it syncs anyway
-  check_background(background)
+  check_inputs(model, z, background, sync=True)  # called once, it syncs anyway
   arg_checks.check_int("max_budget", max_budget, minimum=1)
   dtype = model.params.mean["means"].dtype
   background = jnp.zeros((3,), dtype) if background is None else jnp.asarray(background, dtype)

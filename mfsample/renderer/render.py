@@ -7,6 +7,7 @@ import chex
 import jax
 import jax.numpy as jnp
 
+from mfsample import arg_checks
 from mfsample.camera import Camera
 from mfsample.gaussians import Gaussians
 from mfsample.renderer import sh as sh_lib
@@ -66,7 +67,9 @@ def render(gaussians: Gaussians, camera: Camera, *, background=None,
   Args:
     gaussians: `Gaussians` with N >= 0 entries (unbatched).
     camera: an unbatched `Camera`.
-    background: [C] colour behind the Gaussians (default: zeros).
+    background: [C] floats behind the Gaussians (default: zeros): an RGB colour in [0, 1]
+      (outside it `rgb` is NaN), or any values with `features`. An integer array (uint8
+      0..255) is refused (`ValueError`; pass background / 255); Python numbers are floats.
     settings: `RenderSettings` (static).
     features: optional [N, F] per-Gaussian values blended instead of the SH colour
       (uncertainty maps, relighting). The output `rgb` then has F channels and no clamping.
@@ -119,11 +122,19 @@ def render(gaussians: Gaussians, camera: Camera, *, background=None,
   num_channels = colors.shape[-1]
   if background is None:
     background = jnp.zeros((num_channels,), dtype)
+  # Dtypes are static: an integer colour (uint8 0..255) is refused even under jit.
+  arg_checks.check_float_dtype("background", background,
+                               "floats (a colour in [0, 1]; for 8-bit colours pass "
+                               "background / 255)")
   background = jnp.asarray(background, dtype)
   if background.shape != (num_channels,):
     raise ValueError(f"background must have shape [{num_channels}] (one value per channel of "
                      f"{'features' if features is not None else 'the RGB colour'}), got "
                      f"{list(background.shape)}")
+  nan_unless_colour = nan_if_invalid
+  if features is None:  # an RGB background is a colour: NaN images outside [0, 1]
+    colour_ok = jnp.all((background >= 0.0) & (background <= 1.0))
+    nan_unless_colour = jnp.where(camera.valid & colour_ok, 0.0, jnp.nan)
 
   means2d = proj.means2d
   if screen_offset is not None:
@@ -135,7 +146,7 @@ def render(gaussians: Gaussians, camera: Camera, *, background=None,
   blended, alpha = composite_fn(layout, means2d, proj.conics, opacities, blend_in,
                                 camera.width, camera.height, settings)
   rgb = blended[..., :num_channels] + (1.0 - alpha)[..., None] * background
-  return RenderOutput(rgb=rgb + nan_if_invalid, alpha=alpha + nan_if_invalid,
+  return RenderOutput(rgb=rgb + nan_unless_colour, alpha=alpha + nan_if_invalid,
                       depth=blended[..., num_channels] + nan_if_invalid,
                       stats=layout.stats, radii=proj.radii[:n], visible=proj.valid[:n])
 

@@ -84,9 +84,12 @@ def initial_model(init: InitSettings, spec: SamplerSpec, init_scales, *, seed, b
       raise ValueError("init_from = 'points' needs a dataset with a sparse point cloud (a "
                        "COLMAP or nerfstudio capture)" + (", and this one has no points"
                                                           if points is not None else ""))
+    from mfsample.data import PointCloud
+
+    points = PointCloud(*points).validate()  # colours on another scale: refused, not clipped
     return init_model(key, np.asarray(points.xyz, np.float64), sh_degree=init.sh_degree,
                       init_opacity=init.init_opacity,
-                      colors=np.clip(np.asarray(points.rgb, np.float64), 0.0, 1.0), **kw)
+                      colors=np.asarray(points.rgb, np.float64), **kw)
   from mfsample.data import ply, resolve_path
 
   path = resolve_path(init.ply_path)

@@ -39,7 +39,7 @@ from mfsample import arg_checks, distributed, interrupts, sharding
 from mfsample import workdir as workdir_lib
 from mfsample.data.datasets import scene_extent, to_device
 from mfsample.data.views import Views
-from mfsample.model import Model
+from mfsample.model import Model, check_model
 from mfsample.renderer.budget import BudgetExceededError, fit_budget
 from mfsample.samplers import sobol_rows
 from mfsample.train import checkpoint as ckpt
@@ -349,8 +349,9 @@ def _check_views(views, model):
   if not isinstance(views, Views):
     raise ValueError(f"views must be mfsample.data.Views, got {type(views).__name__}")
   views.validate()
-  if not isinstance(model, Model):
-    raise ValueError(f"model must be a mfsample.Model, got {type(model).__name__}")
+  # Training syncs anyway: a model with a NaN parameter or B_hat beyond its bound is named
+  # here, not trained (the renderer would cull its broken Gaussians silently).
+  check_model(model, sync=True)
 
 
 def _progress_bar(show, **kwargs):
