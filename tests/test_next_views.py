@@ -216,6 +216,11 @@ def test_a_finished_workdir_on_a_read_only_mount_is_read_back(joint_run, tmp_pat
       "views call has results to compute and write (config.json): make it writable, or use "
       "another --workdir")
   assert "Traceback" not in unfinished.stderr
+  viewer = run_read_only(mount, [sys.executable, "-c", "import sys\n"
+                                 "from mfsample.viewer import open_run\n"
+                                 "print(len(open_run(sys.argv[1]).steps()))",
+                                 str(mount / "done")], cwd=str(ROOT))
+  assert viewer.returncode == 0 and viewer.stdout.strip() == "1", viewer.stderr
   assert not list(mount.rglob(".lock"))
 
 

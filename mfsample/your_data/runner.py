@@ -15,8 +15,10 @@
 5. writes the figure and the results.
 
 The workdir: `config.json` (a later call with a different config is refused, naming the
-fields), `checkpoints/`, `train_log.json`, `point_cloud.ply` (a trained field's mean),
-`test/` (renders, U maps as PNG and `uncertainty.npy`, `metrics.json`), `next_views.json`,
+fields), `inputs.json` (the files read: a later call whose files changed stops, or computes
+again as `data.inputs_changed` says), `checkpoints/`, `train_log.json`, `point_cloud.ply`
+(a trained field's mean), `test/` (renders, U maps as PNG and `uncertainty.npy`,
+`metrics.json`), `next_views.json`,
 `next_views/` (the proposals as nerfstudio `transforms.json` and `camera_path.json`, the 3DGS
 `cameras.json` SuperSplat imports, a COLMAP text model, and a mean render and U map each:
 `mfsample.your_data.export`), `uncertainty_ply/` (the model with its uncertainty per
