@@ -320,6 +320,10 @@ def data_block(**fields):
   data.background = (1.0, 1.0, 1.0)  # Colour behind the scene, in the images and the models.
   data.init_bounds = (-1.3, 1.3)  # blender: the cube around the origin holding the scene.
   data.progress = True  # Progress bars of the captures.
+  # A later call on a workdir whose results were computed from files that have changed
+  # since (the dataset's, a .ply): "stop" (an error naming them) or "recompute" (remove the
+  # results and compute them again). Read from the job's own data block; free to change.
+  data.inputs_changed = "stop"
   data.synthetic = syn = ml_collections.ConfigDict()  # kind "synthetic": random Gaussians.
   # "random" (uniform in a cube, random colours), "shell" (an opaque shell) or "cloud".
   syn.shape = "random"

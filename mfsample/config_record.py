@@ -1,4 +1,5 @@
-"""A workdir's `config.json`: the config of its results, and the job that wrote them.
+"""A workdir's `config.json` and `inputs.json`: the config and the files its results were
+computed from, and the job that wrote them.
 
 A job writes its config as `config.json` beside its results, with the job and the package
 version under `WRITTEN_BY` (what the viewer reads). A later call on the same workdir (to
@@ -10,15 +11,22 @@ end up in one table, and nothing is overwritten by mistake.
   check_same_config(config, workdir, free_fields=...,
                     has_results=holds_results(workdir, "runs"))  # before any write
   write_config(config, workdir, written_by)                      # then record it
+
+Beside it, `inputs.json` holds the fingerprints (`mfsample.fingerprints`) of every file the
+results were computed from, as the run read them; `changed_inputs(workdir)` lists those that
+are no longer what they were, so that a later call stops (or computes again) before it
+computes anything from them.
 """
 
 import json
 import os
 
-from mfsample._json import without_fields, write_text
+from mfsample import fingerprints
+from mfsample._json import without_fields, write_json, write_text
 from mfsample.workdir import WorkdirError, differences
 
 CONFIG_FILE = "config.json"
+INPUTS_FILE = "inputs.json"
 # The key of config.json that records which job and which mfsample wrote the workdir (not a
 # config field: a later call compares the rest).
 WRITTEN_BY = "_written_by"
@@ -97,3 +105,37 @@ def write_config(config, workdir, written_by=None):
   if written_by is not None:
     record = {WRITTEN_BY: dict(written_by), **record}
   write_text(os.path.join(workdir, CONFIG_FILE), json.dumps(record, indent=2))
+
+
+def read_inputs(workdir):
+  """{path: fingerprint} of the files the results of `workdir` were computed from ({} when
+  it records none: a workdir written before inputs were recorded).
+
+  Raises:
+    WorkdirError: `inputs.json` exists but is not such a record (naming the file).
+  """
+  path = os.path.join(workdir, INPUTS_FILE)
+  if not os.path.exists(path):
+    return {}
+  try:
+    with open(path, encoding="utf-8") as f:
+      record = json.load(f)
+    files = record["files"]
+    if not (isinstance(files, dict) and all(isinstance(v, dict) for v in files.values())):
+      raise ValueError("not a record of files")
+  except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError) as e:
+    raise WorkdirError(f"{path} is unreadable ({e}), so the files the results in {workdir} "
+                       "were computed from are unknown: use a new --workdir, restore that "
+                       "file, or remove it to take the inputs as they are now.") from e
+  return files
+
+
+def changed_inputs(workdir):
+  """["path: what changed", ...] of the recorded inputs of `workdir` (`read_inputs`) that
+  are no longer what they were ([] when none, or none recorded)."""
+  return fingerprints.changes(read_inputs(workdir))
+
+
+def write_inputs(workdir, files):
+  """Writes `inputs.json` ({path: fingerprint} of the files read), atomically."""
+  write_json(os.path.join(workdir, INPUTS_FILE), {"files": dict(sorted(files.items()))})

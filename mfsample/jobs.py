@@ -22,12 +22,21 @@ one job on one workdir, all reading it; only process 0 writes it (`Workdir.write
 and figures, on it), and only process 0 holds the lock and checks the workdir, passing
 its verdict on to the others, which refuse to start with a config that differs from
 process 0's.
+
+A workdir also records the files its results were computed from (`inputs.json`: every file
+the loaders read during the call, `mfsample.fingerprints`), and a result record lists the
+files it points to (`Workdir.write_json(..., files=...)`). A later call stops before it
+computes anything when a recorded input has changed (or computes the results again, as the
+config's `data.inputs_changed` says), and reads a record back only while the files it
+points to are what they were. A workdir it may not write (a read-only mount) is still read:
+a call with nothing to compute returns its results; one that has to write stops, naming it.
 """
 
 import contextlib
 import dataclasses
 import json
 import os
+import shutil
 import signal
 import sys
 import warnings
@@ -35,10 +44,10 @@ from collections.abc import Callable
 
 import numpy as np
 
-from mfsample import config_record, distributed, interrupts
+from mfsample import config_record, distributed, fingerprints, interrupts
 from mfsample import workdir as workdir_lib
 from mfsample._json import atomic_path, write_json, write_text
-from mfsample.config_checks import ConfigError
+from mfsample.config_checks import ConfigError, check_choice, get_field
 from mfsample.data import DatasetError
 
 
@@ -57,6 +66,9 @@ class Job:
       something, a call with a config that differs elsewhere is refused.
     report: optional (results, workdir) -> text that `main` prints.
     progress_field: the config's flag of the progress bars.
+    inputs_field: the config's field that says what a call does when files its results
+      were computed from have changed: "stop" (the default where the config lacks it) or
+      "recompute" (`INPUTS_CHANGED`); free to differ between calls.
   """
 
   name: str
@@ -67,6 +79,13 @@ class Job:
   results: tuple
   report: Callable | None = None
   progress_field: str = "progress"
+  inputs_field: str = "data.inputs_changed"
+
+
+# What a call does when files its workdir's results were computed from have changed.
+INPUTS_CHANGED = ("stop", "recompute")
+# The key under which a result record lists the files it points to (`Workdir.write_json`).
+FILES_KEY = "_files"
 
 
 class Workdir:
@@ -75,13 +94,32 @@ class Workdir:
   Attributes:
     writes: whether this process writes the workdir (process 0 of a multi-process run; the
       writing methods do nothing in the others, and so should a job's own writes).
+    read_only: whether the workdir may only be read (a read-only mount or folder): its
+      results are read, and the first write raises `WorkdirReadOnlyError`.
   """
 
-  def __init__(self, job: Job, config, path):
+  def __init__(self, job: Job, config, path, *, read_only=False, recording=None,
+               inputs=None):
     self.job = job
     self.config = config
     self.path = os.fspath(path)
     self.writes = distributed.is_writer()
+    self.read_only = read_only
+    # The files this call reads (`fingerprints.recording`), and the record of the earlier
+    # calls' inputs that this call keeps beside them.
+    self._recording = recording
+    self._inputs = dict(inputs or {})
+
+  def _writable(self, name):
+    """Raises `WorkdirReadOnlyError` when the workdir may not be written (`name`: the entry
+    this call was about to write)."""
+    if self.read_only:
+      raise workdir_lib.WorkdirReadOnlyError(
+          f"{self.path} is read-only, and this {self.job.name} call has results to compute "
+          f"and write ({name}): make it writable, or use another --workdir")
+
+  def _write_inputs(self, *_):
+    config_record.write_inputs(self.path, {**self._inputs, **self._recording.files})
 
   def file(self, *parts):
     """The path of an entry of the workdir."""
@@ -95,25 +133,41 @@ class Workdir:
     the job that writes them and the package version (`config_record.WRITTEN_BY`)."""
     if not self.writes:
       return
+    self._writable(config_record.CONFIG_FILE)
     os.makedirs(self.path, exist_ok=True)
     config_record.write_config(self.config, self.path,
                              {"job": self.job.kind, "name": self.job.name,
                               "mfsample": package_version()})
+    if self._recording is not None:  # the inputs read so far, then each as it is read
+      self._write_inputs()
+      self._recording.on_new = self._write_inputs
 
-  def write_json(self, name, obj, indent=1):
-    """Writes `obj` as JSON to the entry `name`, atomically."""
-    if self.writes:
-      write_json(self.file(name), obj, indent=indent)
+  def write_json(self, name, obj, indent=1, files=()):
+    """Writes `obj` as JSON to the entry `name`, atomically.
+
+    Args:
+      files: entries of the workdir (files or folders) that the record points to, written
+        before it: their fingerprints are kept in the record (under `FILES_KEY`), and
+        `read_json` reads it back only while they are what they were.
+    """
+    if not self.writes:
+      return
+    self._writable(name)
+    if files:
+      obj = {**obj, FILES_KEY: fingerprints.files_under(self.path, files)}
+    write_json(self.file(name), obj, indent=indent)
 
   def write_text(self, name, text):
     if self.writes:
+      self._writable(name)
       write_text(self.file(name), text)
 
   def read_json(self, name):
     """The JSON content of the entry `name`; None when it is absent or damaged.
 
-    A damaged file (truncated, not JSON, not an object) is reported by a warning naming it,
-    and the caller computes it again (its atomic rewrite replaces the damaged file).
+    A damaged file (truncated, not JSON, not an object), or a record whose files (`files`
+    of `write_json`) are missing or changed, is reported by a warning naming it, and the
+    caller computes it again (its atomic rewrite replaces the damaged file).
     """
     path = self.file(name)
     if not os.path.exists(path):
@@ -123,8 +177,18 @@ class Workdir:
         value = json.load(f)
       if not isinstance(value, dict):
         raise ValueError("not a JSON object")
+      pointed = value.pop(FILES_KEY, {})
+      if not (isinstance(pointed, dict) and all(isinstance(v, dict)
+                                                for v in pointed.values())):
+        raise ValueError(f"{FILES_KEY} is not a record of files")
     except (OSError, UnicodeDecodeError, ValueError) as e:
       warnings.warn(f"{path} is damaged ({e}); it is computed again", stacklevel=2)
+      return None
+    changed = fingerprints.changes({self.file(p): fp for p, fp in pointed.items()})
+    if changed:
+      more = f" and {len(changed) - 1} more" if len(changed) > 1 else ""
+      warnings.warn(f"{path} points to files that are no longer what it wrote ({changed[0]}"
+                    f"{more}); it is computed again", stacklevel=2)
       return None
     return value
 
@@ -132,6 +196,7 @@ class Workdir:
     """Writes `arrays` as a compressed .npz to the entry `name`, atomically."""
     if not self.writes:
       return
+    self._writable(name)
     with atomic_path(self.file(name)) as tmp:
       np.savez_compressed(tmp, **arrays)
 
@@ -215,7 +280,7 @@ def check_workdir(job: Job, config, workdir):
     mfsample.workdir.WorkdirError: naming the differing fields, or the unreadable config.json.
   """
   config_record.check_same_config(
-      config, workdir, free_fields=job.free_fields,
+      config, workdir, free_fields=job.free_fields + (job.inputs_field,),
       has_results=config_record.holds_results(workdir, *job.results),
       results=f"{job.name} results",
       remedy="use a new --workdir, or the config that made them (or remove "
@@ -223,24 +288,80 @@ def check_workdir(job: Job, config, workdir):
              + " to redo them)")
 
 
+def inputs_policy(job: Job, config):
+  """What a call does when its workdir's inputs changed: `job.inputs_field` of `config`
+  ("stop" where the config has no such field). ConfigError for another value."""
+  try:
+    get_field(config, job.inputs_field)
+  except ConfigError:
+    return "stop"
+  return check_choice(config, job.inputs_field, INPUTS_CHANGED)
+
+
+def check_inputs(job: Job, config, workdir, read_only=False):
+  """The record of inputs a call on `workdir` keeps ({path: fingerprint}; {} when the
+  workdir holds no results, or they are to be computed again).
+
+  When a file its results were computed from has changed (`config_record.changed_inputs`),
+  the call stops, or, where `job.inputs_field` says "recompute", the results
+  (`job.results`) and their record are removed, with a warning naming the files.
+
+  Raises:
+    mfsample.workdir.InputsChangedError: naming every changed file and what changed.
+    mfsample.workdir.WorkdirReadOnlyError: results to recompute in a read-only workdir.
+    mfsample.workdir.WorkdirError: an unreadable `inputs.json`.
+  """
+  if not config_record.holds_results(workdir, *job.results):
+    return {}
+  record = config_record.read_inputs(workdir)
+  changed = fingerprints.changes(record)
+  if not changed:
+    return record
+  what = "; ".join(changed)
+  if inputs_policy(job, config) == "stop":
+    raise workdir_lib.InputsChangedError(
+        f"{workdir} holds {job.name} results computed from files that have changed since: "
+        f"{what}. Restore them, use a new --workdir, or set --config.{job.inputs_field}="
+        "recompute to compute the results again")
+  if read_only:
+    raise workdir_lib.WorkdirReadOnlyError(
+        f"{workdir} is read-only, and its {job.name} results are to be computed again "
+        f"(their inputs changed: {what}): make it writable, or use another --workdir")
+  warnings.warn(f"{workdir}: files its {job.name} results were computed from have changed "
+                f"({what}); computing them again ({job.inputs_field} = 'recompute')",
+                stacklevel=3)
+  for name in (*job.results, config_record.INPUTS_FILE):
+    path = os.path.join(workdir, name)
+    if os.path.isdir(path):
+      shutil.rmtree(path)
+    elif os.path.exists(path):
+      os.remove(path)
+  return {}
+
+
 @contextlib.contextmanager
 def open_workdir(job: Job, config, workdir):
-  """Validates `config`, takes the workdir's lock for the block, and refuses a workdir
-  holding results of another config.
+  """Validates `config`, takes the workdir's lock for the block, refuses a workdir holding
+  results of another config, and checks the files they were computed from.
 
   Nothing is written but the lock (`workdir/.lock`, removed at the end, with the folder if
   the block leaves it empty): the job records its config (`Workdir.write_config`) once its
-  data are loaded. In a multi-process run every process must pass the same config; process
-  0 takes the lock and checks the workdir, and the others start only if it succeeded.
+  data are loaded, and with it the files read so far (`inputs.json`, then each file as it
+  is read). In a multi-process run every process must pass the same config; process 0 takes
+  the lock and checks the workdir, and the others start only if it succeeded. A workdir that
+  exists but may not be written (a read-only mount) is opened without the lock, read-only
+  (`Workdir.read_only`).
 
   Raises:
     mfsample.config_checks.ConfigError: a field is invalid (named).
     mfsample.workdir.WorkdirBusyError: another process holds the workdir (named).
-    mfsample.workdir.WorkdirError: see `check_workdir`.
+    mfsample.workdir.WorkdirError: see `check_workdir` and `check_inputs`; a workdir that
+      does not exist and cannot be created (`WorkdirReadOnlyError`).
     mfsample.distributed.DistributedError: the processes' configs differ, or (in the
       others) process 0 refused the workdir.
   """
   job.validate(config)
+  inputs_policy(job, config)
   distributed.check_same_everywhere(
       json.dumps(config_record.config_dict(config), sort_keys=True), f"the {job.name} config")
   if not distributed.is_writer():
@@ -248,14 +369,23 @@ def open_workdir(job: Job, config, workdir):
     yield Workdir(job, config, workdir)
     return
   with contextlib.ExitStack() as stack:
+    read_only = False
     try:
-      stack.enter_context(workdir_lib.locked(workdir, job.name))
+      try:
+        stack.enter_context(workdir_lib.locked(workdir, job.name))
+      except workdir_lib.WorkdirReadOnlyError:
+        if not os.path.isdir(workdir):
+          raise
+        read_only = True  # nobody can write it: its results may be read without the lock
       check_workdir(job, config, workdir)
+      kept = check_inputs(job, config, workdir, read_only)
     except Exception as e:
       distributed.share_outcome(e)
       raise
     distributed.share_outcome(None)
-    yield Workdir(job, config, workdir)
+    recording = stack.enter_context(fingerprints.recording())
+    yield Workdir(job, config, workdir, read_only=read_only, recording=recording,
+                  inputs=kept)
 
 
 def table_report(results, workdir):

@@ -23,6 +23,18 @@ class WorkdirError(ValueError):
   """A workdir holds results of a different (or unknown) config."""
 
 
+class InputsChangedError(WorkdirError):
+  """A workdir holds results computed from files that have changed since (named)."""
+
+
+class WorkdirReadOnlyError(WorkdirError):
+  """A call has to write into a workdir it may only read (a read-only mount or folder)."""
+
+
+# What opening or creating a file says of a folder the process may not write.
+_READ_ONLY = (errno.EACCES, errno.EPERM, errno.EROFS)
+
+
 def differences(old, new, prefix=""):
   """Dotted paths of the leaves where two nested dicts differ."""
   if not (isinstance(old, dict) and isinstance(new, dict)):
@@ -68,12 +80,21 @@ def locked(workdir, what="a run"):
 
   Raises:
     WorkdirBusyError: a live process holds it (naming the process, its host and its job).
+    WorkdirReadOnlyError: the folder (or its parent, to create it) may not be written: no
+      writer can hold it, and none can write it.
   """
   created = not os.path.isdir(workdir)
-  os.makedirs(workdir, exist_ok=True)
   path = os.path.join(workdir, LOCK_FILE)
-  while True:
+  try:
+    os.makedirs(workdir, exist_ok=True)
     fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+  except OSError as e:
+    if e.errno not in _READ_ONLY:
+      raise
+    raise WorkdirReadOnlyError(
+        f"{workdir} is read-only ({e.strerror}): {what} cannot write there; make it "
+        "writable, or use another --workdir") from None
+  while True:
     try:
       fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except OSError as e:
@@ -97,6 +118,7 @@ def locked(workdir, what="a run"):
     if same:
       break
     os.close(fd)
+    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
   stale = _holder(path)
   if stale:
     warnings.warn(f"{workdir}: taking over from {stale}, which ended without releasing it",

@@ -326,6 +326,11 @@ def test_the_config_is_checked_on_entry_naming_the_field():
   config.planning.ascent_final_lr = 1.0
   with pytest.raises(config_checks.ConfigError, match="planning.ascent_final_lr"):
     validate_lighting(config)
+  config = tiny()
+  config.planning.downscale = config.data.width + 1  # a render under one pixel
+  with pytest.raises(config_checks.ConfigError, match=rf"config.planning.downscale = "
+                     rf"{config.data.width + 1}: the images are"):
+    validate_lighting(config)
 
 
 # ------------------------------------------------------------------ training

@@ -123,6 +123,107 @@ def test_colmap_capture_and_a_ply_get_posthoc_uncertainty(joint_run, tmp_path):
   assert results["live_gaussians"] == len(stored["means"])
 
 
+@pytest.mark.slow
+def test_results_whose_files_are_damaged_are_computed_again(joint_run, tmp_path):
+  """A finished workdir (copied, times kept) whose next_views.json is damaged and whose
+  next_views/ is gone: both are computed again from the checkpoints, bit for bit."""
+  import shutil
+
+  workdir = tmp_path / "copy"
+  shutil.copytree(joint_run[0], workdir)
+  config = next_views_configs.get_config("tiny")
+  finished = json.loads((workdir / "results.json").read_text())
+  assert set(finished.pop("_files")) >= {"next_views.json", "train_log.json",
+                                         os.path.join("next_views", "cameras.json")}
+  assert run_next_views(config, str(workdir)) == finished  # intact: read back
+  record = (workdir / "next_views.json").read_bytes()
+  exported = {p.relative_to(workdir): p.read_bytes() for p in (workdir / "next_views").rglob("*")
+              if p.is_file()}
+  (workdir / "next_views.json").write_bytes(record[: len(record) // 2])
+  shutil.rmtree(workdir / "next_views")
+  with pytest.warns(UserWarning, match=r"results.json points to files that are no longer what "
+                    r"it wrote \(.*next_views"):
+    again = run_next_views(config, str(workdir))
+  assert again["top_k"] == finished["top_k"] and again["test"] == finished["test"]
+  assert (workdir / "next_views.json").read_bytes() == record
+  assert {p.relative_to(workdir): p.read_bytes() for p in (workdir / "next_views").rglob("*")
+          if p.is_file()} == exported
+  assert run_next_views(config, str(workdir)) == again  # and read back again
+
+
+@pytest.mark.slow
+def test_a_posthoc_model_replaced_at_its_path_stops_the_rerun_or_is_recomputed(joint_run,
+                                                                              tmp_path):
+  """The 3DGS workflow: a model retrained to the same path. The finished workdir of the old
+  model stops, naming the file; with data.inputs_changed = "recompute" the results are those
+  of the new model."""
+  import shutil
+
+  from mfsample.data.ply import load_ply, ply_arrays, write_ply
+  from mfsample.workdir import InputsChangedError
+
+  ply = tmp_path / "point_cloud.ply"
+  shutil.copy(os.path.join(joint_run[0], "point_cloud.ply"), ply)
+  config = next_views_configs.get_config("tiny")
+  config.posthoc.ply = str(ply)
+  config.posthoc.steps = 6
+  config.views.train_every = 1
+  config.next_views.candidates = "sphere"
+  workdir = str(tmp_path / "w")
+  first = run_next_views(config, workdir)
+  with open(os.path.join(workdir, "inputs.json")) as f:
+    assert list(json.load(f)["files"]) == [str(ply)]  # (synthetic data: no files)
+  retrained = load_ply(ply)
+  retrained["opacity_logits"] = retrained["opacity_logits"] - 1.0  # same size, other model
+  write_ply(ply, ply_arrays(retrained))
+  results = os.path.join(workdir, "results.json")
+  before = os.stat(results).st_mtime_ns
+  with pytest.raises(InputsChangedError, match=rf"{ply}: modified .*, sha256 \w+ -> \w+\. "
+                     r"Restore them, .*--config.data.inputs_changed=recompute"):
+    run_next_views(config, workdir)
+  assert os.stat(results).st_mtime_ns == before  # nothing computed, nothing written
+  config.data.inputs_changed = "recompute"
+  with pytest.warns(UserWarning, match=rf"{ply}: .*computing them again"):
+    second = run_next_views(config, workdir)
+  assert second["steps"] == 6 and second["test"]["mean_u"] != first["test"]["mean_u"]
+  config.data.inputs_changed = "stop"  # free: the same workdir, now of the new model
+  assert run_next_views(config, workdir) == second
+
+
+@pytest.mark.slow
+def test_a_finished_workdir_on_a_read_only_mount_is_read_back(joint_run, tmp_path):
+  """`experiments/next_views.py` on a read-only copy: a finished workdir prints its report
+  (exit 0, no lock file); one with results to compute stops with one line naming it."""
+  import shutil
+  import sys
+
+  from readonly_testlib import run_read_only
+
+  mount = tmp_path / "mount"
+  shutil.copytree(joint_run[0], mount / "done")
+  shutil.copytree(joint_run[0], mount / "unfinished")
+  os.remove(mount / "unfinished" / "results.json")
+  command = [sys.executable, str(ROOT / "experiments" / "next_views.py"),
+             f"--config={ROOT / 'configs' / 'next_views.py'}:tiny"]
+  done = run_read_only(mount, command + [f"--workdir={mount / 'done'}"], cwd=str(tmp_path))
+  assert done.returncode == 0, done.stderr
+  assert "next view 1:" in done.stdout and "Traceback" not in done.stderr
+  unfinished = run_read_only(mount, command + [f"--workdir={mount / 'unfinished'}"],
+                             cwd=str(tmp_path))
+  assert unfinished.returncode == 2
+  assert unfinished.stderr.strip().splitlines()[-1] == (
+      f"next views: WorkdirReadOnlyError: {mount / 'unfinished'} is read-only, and this next "
+      "views call has results to compute and write (config.json): make it writable, or use "
+      "another --workdir")
+  assert "Traceback" not in unfinished.stderr
+  viewer = run_read_only(mount, [sys.executable, "-c", "import sys\n"
+                                 "from mfsample.viewer import open_run\n"
+                                 "print(len(open_run(sys.argv[1]).steps()))",
+                                 str(mount / "done")], cwd=str(ROOT))
+  assert viewer.returncode == 0 and viewer.stdout.strip() == "1", viewer.stderr
+  assert not list(mount.rglob(".lock"))
+
+
 def test_config_is_checked_before_anything_is_written(tmp_path):
   for field, value, message in [
       ("next_views.samples", 1, "config.next_views.samples = 1"),
@@ -140,6 +241,49 @@ def test_config_is_checked_before_anything_is_written(tmp_path):
   config = next_views_configs.get_config("tiny")
   config.posthoc.ply = str(tmp_path / "missing.ply")
   with pytest.raises(FileNotFoundError, match="config.posthoc.ply"):
+    run_next_views(config, str(tmp_path / "w"))
+  assert not os.path.exists(tmp_path / "w")
+
+
+@pytest.mark.parametrize("fields, message", [
+    ({"data.num_train": 1}, r"config.data.num_train = 1 with config.views.train_every = 2 "
+     r"leaves no unused candidate view"),
+    ({"data.num_train": 1, "views.train_every": 7}, r"config.data.num_train = 1 with "
+     r"config.views.train_every = 7 leaves no unused"),
+    ({"next_views.score_downscale": 64}, r"config.next_views.score_downscale = 64: the "
+     r"candidates are 32 x 32 pixels \(config.data.width x height\).* must be <= 32"),
+    ({"next_views.score_downscale": 33, "next_views.candidates": "sphere"},
+     r"score_downscale = 33"),
+])
+def test_what_the_data_forbid_is_refused_at_validation(fields, message, tmp_path):
+  """Checks that depend on the config and the data's shapes alone fail before training."""
+  config = next_views_configs.get_config("tiny")
+  for field, value in fields.items():
+    block, leaf = field.split(".")
+    config[block][leaf] = value
+  with pytest.raises(ConfigError, match=message):
+    run_next_views(config, str(tmp_path / "w"))
+  assert not os.path.exists(tmp_path / "w")
+
+
+@pytest.mark.slow
+def test_what_a_capture_forbids_is_refused_once_it_is_loaded_before_training(tmp_path):
+  """A capture's views are known once it is read: the same rules, before anything trains or
+  is written."""
+  from mfsample import testing
+  from mfsample.data import PointCloud, export_colmap
+
+  views, truth = testing.synthetic_views(3, size=32)
+  xyz = np.asarray(truth.means)
+  export_colmap(tmp_path / "capture", views.replace(names=()),
+                PointCloud(xyz, np.full_like(xyz, 0.5)))
+  config = next_views_configs.get_config("tiny")
+  config.data.kind = "colmap"
+  config.data.path = str(tmp_path / "capture")
+  config.data.holdout_every = 3  # view 0 tests, views 1 and 2 train
+  config.next_views.score_downscale = 40  # (width and height are not the capture's fields)
+  with pytest.raises(ConfigError, match=r"score_downscale = 40: the candidates are 32 x 32 "
+                     r"pixels \(the images of the dataset at .*capture\)"):
     run_next_views(config, str(tmp_path / "w"))
   assert not os.path.exists(tmp_path / "w")
 

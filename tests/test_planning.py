@@ -470,3 +470,30 @@ def test_seconds_summary_spreads_runs_and_rounds_after_the_first():
   assert summary["farthest"] == {"runs": 1, "run": {"min": 5.0, "median": 5.0, "max": 5.0}}
   table = tables.seconds_markdown(summary, {"ours_sel": "S", "farthest": "F"})
   assert "| F | 1 | 5 / 5 / 5 | - |" in table and "| S | 3 | 10 / 20 / 30 | 2 / 5 / 8 |" in table
+
+
+@pytest.mark.parametrize("field, value, message", [
+    ("rounds.downscale", 5, r"config.rounds.downscale = 5: the pool's images are 24 x 24 "
+     r"pixels \(config.data.width x height\), which it must divide"),
+    ("strategy.score_downscale", 25, r"config.strategy.score_downscale = 25: .* must be <= 24"),
+    ("strategy.optimize.downscale", 30, r"config.strategy.optimize.downscale = 30"),
+])
+def test_sizes_the_images_cannot_take_are_refused_before_anything_trains(field, value,
+                                                                          message, tmp_path):
+  """Rules of the config against the pool's image size: at validation where the config gives
+  the size, once the pool is loaded for files (`check_image_size` with its path)."""
+  from mfsample.config_checks import ConfigError
+  from mfsample.planning.config import check_image_size
+
+  config = tiny_config()
+  block, leaf = field.rsplit(".", 1)
+  node = config
+  for part in block.split("."):
+    node = node[part]
+  node[leaf] = value
+  with pytest.raises(ConfigError, match=message):
+    runner.run_camera_planning(config, str(tmp_path / "w"))
+  assert not (tmp_path / "w").exists()
+  with pytest.raises(ConfigError, match=r"\(the dataset at data/lego\)"):
+    check_image_size(config, 24, 24, "data/lego")
+  check_image_size(config, 480, 480, "data/lego")

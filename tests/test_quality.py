@@ -96,6 +96,8 @@ def test_sampler_flags_and_labels():
     ("ause.baselines", ("posthoc", "nope"), "config.ause.baselines: 'nope' is not one of"),
     ("ause.posthoc_sampler", "deterministic", "config.ause.posthoc_sampler: sampler"),
     ("ause.posthoc_steps", 0, "config.ause.posthoc_steps = 0: must be an integer >= 1"),
+    ("candidates.planning.strategy.score_downscale", 65,
+     "config.candidates.planning.strategy.score_downscale = 65: the pool's images are 64 x 64"),
 ])
 def test_bad_configs_are_refused_naming_the_field(field, value, message):
   config = uncertainty_quality.get_config()
@@ -104,6 +106,8 @@ def test_bad_configs_are_refused_naming_the_field(field, value, message):
   for p in parents:
     node = node[p]
   node[leaf] = value
+  if field.startswith("candidates."):
+    config.candidates.enabled = True
   with pytest.raises(config_checks.ConfigError, match=message):
     validate_quality(config)
 

@@ -11,6 +11,8 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
+from mfsample import fingerprints
+
 # A rotation is accepted when |R^T R - I| and |det R - 1| stay below this. Dataset poses are
 # stored as float32 (lego: errors ~1e-7); anything near 1e-3 is a scaled or sheared matrix.
 ROTATION_TOLERANCE = 1e-3
@@ -35,9 +37,12 @@ def require_dir(path, what="dataset folder"):
 
 
 def require_file(path, what="file"):
+  """`path`, a file about to be read as an input: announced to the recordings of a run's
+  inputs (`mfsample.fingerprints.note`). FileNotFoundError naming `what` when absent."""
   path = Path(path)
   if not path.is_file():
     raise FileNotFoundError(f"{what} not found: {path}")
+  fingerprints.note(path)
   return path
 
 

@@ -40,7 +40,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from mfsample import arg_checks
+from mfsample import arg_checks, fingerprints
 from mfsample.camera import Camera
 from mfsample.data import _io, colmap_files
 from mfsample.data.views import Views
@@ -126,6 +126,10 @@ def find_sparse(root):
       f"and points3D) in {root / 'sparse' / '0'}, {root / 'sparse'} or {root}.")
 
 
+# The files of a sparse model (pycolmap reads rigs and frames where they exist).
+_MODEL_FILES = ("cameras", "images", "points3D", "rigs", "frames")
+
+
 def read_reconstruction(sparse):
   """A `pycolmap.Reconstruction` from a sparse model folder (binary or text).
 
@@ -139,6 +143,9 @@ def read_reconstruction(sparse):
     if not any((sparse / f"{name}{ext}").is_file() for ext in (".bin", ".txt")):
       raise FileNotFoundError(f"{sparse / (name + '.bin')} not found (nor {name}.txt): a "
                               "COLMAP sparse model has cameras, images and points3D files.")
+  for file in sorted(sparse.iterdir()):  # the model files pycolmap reads are inputs
+    if file.stem in _MODEL_FILES and file.suffix in (".bin", ".txt"):
+      fingerprints.note(file)
   # pycolmap trusts the files' counts (a truncated file can exhaust the memory): walk first.
   colmap_files.check_model_files(sparse)
   try:

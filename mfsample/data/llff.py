@@ -16,6 +16,7 @@ no recentring or rescaling (NeRF's `recenter_poses` / bound scaling are training
 
 import numpy as np
 
+from mfsample import fingerprints
 from mfsample.camera import Camera
 from mfsample.data import _io
 from mfsample.data.views import Views
@@ -75,6 +76,7 @@ def load_llff(path, *, factor=8):
 
   image_dir = _io.require_dir(root / ("images" if factor == 1 else f"images_{factor}"),
                               f"image folder for factor={factor}")
+  fingerprints.note(image_dir)  # its listing pairs the images with the poses
   files = sorted(p for p in image_dir.iterdir()
                  if p.is_file() and p.suffix.lower() in _io.IMAGE_SUFFIXES)
   if len(files) != len(mats):

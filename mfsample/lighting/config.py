@@ -155,7 +155,12 @@ def validate(config):
     cc.check_int(config, f, minimum=11)  # the SSIM window
   cc.check_float(config, "model.extent", above=0.0, optional=True)
   cc.check_int(config, "planning.samples", minimum=2)
-  cc.check_int(config, "planning.downscale", minimum=1)
+  down = cc.check_int(config, "planning.downscale", minimum=1)
+  if down > min(config.data.width, config.data.height):  # (kinds with lights: no files)
+    raise cc.ConfigError(f"config.planning.downscale = {down}: the images are "
+                         f"{config.data.width} x {config.data.height} pixels (config.data."
+                         "width x height), which cannot be rendered that much smaller (under "
+                         f"one pixel); it must be <= {min(config.data.width, config.data.height)}")
   ascent_settings(config)
   cc.check_int(config, "test_lights.num_environments", minimum=0)
   cc.check_int(config, "test_lights.num_random", minimum=0)

@@ -191,7 +191,8 @@ def _shared_phase(ctx, setup, wd, bar, budgets):
             "live_gaussians": res.state.model.num_live}
   training.save_state(directory, res.state, res.setup, {"lights": 1})
   wd.save_arrays("shared/relit.npz", pred=pred.astype(np.float16))
-  wd.write_json("shared/record.json", record)  # last: marks the phase done
+  wd.write_json("shared/record.json", record,  # last: marks the phase done
+                files=("shared/relit.npz",))
   return res.state, res.setup, record, budgets
 
 
@@ -282,7 +283,8 @@ def run_light_planning(config, workdir):
       ran.append(name)
       predictions[name] = pred.astype(np.float16)
       wd.save_arrays(f"runs/{name}_relit.npz", pred=predictions[name])
-      wd.write_json(f"runs/{name}.json", record)  # after its arrays: marks the strategy done
+      wd.write_json(f"runs/{name}.json", record,  # after its arrays: marks the strategy done
+                    files=(f"runs/{name}_relit.npz",))
       shutil.rmtree(wd.file("runs", name), ignore_errors=True)
       records.append(record)
     bar.close()

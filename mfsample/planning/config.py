@@ -235,7 +235,40 @@ def validate(config):
   c.check_int(config, "figures.landscape_u", minimum=1)
   c.check_int(config, "figures.landscape_v", minimum=1)
   c.check_bool(config, "figures.landscape_trajectory")
+  if data.kind not in FILE_KINDS:  # the pool's image size is the config's
+    check_image_size(config, data.width, data.height)
   return config
+
+
+# The fields that render candidates smaller than the pool's images (`downscale_camera`).
+SCORE_DOWNSCALES = ("strategy.score_downscale", "strategy.ours.score_downscale",
+                    "strategy.fisher.score_downscale", "strategy.activenerf.score_downscale",
+                    "strategy.optimize.downscale")
+
+
+def check_image_size(config, width, height, pool=None, prefix="config"):
+  """The rules of a planning config against its pool's images of `width` x `height` pixels,
+  the config's (`pool` None) or those of the files at `pool`: the round models' images are
+  box-filtered by `rounds.downscale` (which must divide both sides), the candidates scored
+  at 1 / `SCORE_DOWNSCALES` of their size (at least one pixel). `validate` calls it where
+  the config gives the size, the job once the pool is loaded; both before anything trains.
+
+  Raises:
+    ConfigError: naming the field, its value and the image size.
+  """
+  size = (f"the pool's images are {width} x {height} pixels ("
+          + ("config.data.width x height)" if pool is None else f"the dataset at {pool})"))
+  down = int(config.rounds.downscale)
+  if width % down or height % down:
+    raise config_checks.ConfigError(
+        f"{prefix}.rounds.downscale = {down}: {size}, which it must divide (the round models' "
+        "images are box-filtered by it)")
+  for field in SCORE_DOWNSCALES:
+    value = int(config_checks.get_field(config, field))
+    if value > min(width, height):
+      raise config_checks.ConfigError(
+          f"{prefix}.{field} = {value}: {size}, which cannot be rendered {value} times smaller "
+          f"(under one pixel); it must be <= {min(width, height)}")
 
 
 # ----------------------------------------------------------------- variants

@@ -24,6 +24,7 @@ first round of the three "Ours" variants) are shared through an in-memory cache.
 import collections
 import dataclasses
 import hashlib
+import os
 import time
 from typing import NamedTuple
 
@@ -36,12 +37,13 @@ from mfsample import metrics as metrics_lib
 from mfsample import view_uncertainty as unc
 from mfsample.baselines import activenerf
 from mfsample.config_blocks import data_spec, speed_only_fields
+from mfsample.data import FILE_KINDS
 from mfsample.data._io import area_downscale
 from mfsample.data.views import Views
 from mfsample.jobs import Budgets
 from mfsample.planning import figures, poses, strategies, tables, training
 from mfsample.planning import rounds as rounds_lib
-from mfsample.planning.config import strategy_settings, validate
+from mfsample.planning.config import check_image_size, strategy_settings, validate
 from mfsample.planning.pool import Pool, make_pool, stack_cameras
 from mfsample.samplers import STOCHASTIC_KINDS, sample_z
 from mfsample.train.config import recipe
@@ -399,6 +401,9 @@ def run_camera_planning(config, workdir):
       raise ValueError(f"config.max_views = {config.max_views}: the pool has only "
                        f"{len(pool.candidates)} candidates")
     initial_index(config, 0, len(pool.candidates))  # refuses an initial_view beyond the pool
+    _, height, width = np.shape(pool.candidates.images)[:3]
+    check_image_size(config, width, height,
+                     config.data.path if config.data.kind in FILE_KINDS else None)
     wd.write_config()
     settings = strategy_settings(config)
     names = list(config.strategies)
@@ -445,7 +450,8 @@ def run_camera_planning(config, workdir):
                           pool)
       if wd.writes:
         export_views(wd.file("views", run_name(name, seed)), selected)
-      wd.write_json(entry, record)  # after its views: marks the run done
+      # After its views: marks the run done, while its views are what it wrote.
+      wd.write_json(entry, record, files=(os.path.join("views", run_name(name, seed)),))
       records.append(record)
     bar.close()
 

@@ -287,7 +287,7 @@ def run_ause(config, wd, bar=None):
           record.update(scene=scene, seed=int(seed), train_views=train_idx.tolist(),
                         test_views=test_idx.tolist(), seconds=time.perf_counter() - t0)
           wd.save_arrays(stem + ".npz", **arrays)
-          wd.write_json(stem + ".json", record)  # last: marks the unit done
+          wd.write_json(stem + ".json", record, files=(stem + ".npz",))  # last: marks it done
         records.append(record)
         unit_arrays[(scene, int(seed), name)] = arrays
         if bar is not None:

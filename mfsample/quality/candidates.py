@@ -50,9 +50,37 @@ def case_name(steps, sampler, seed, views):
   return f"steps{int(steps)}-{sampler.replace(':', '')}-seed{int(seed)}-views{int(views)}"
 
 
-def run_candidates(config, wd, bar=None):
+def candidates_pool(config):
+  """The planning pool of `config.candidates.planning`, checked against the part's fields
+  (before anything trains).
+
+  Raises:
+    ConfigError: a view count that leaves no unused candidate, or an image size the round
+      models or the scoring cannot be made at (`planning.config.check_image_size`).
+  """
+  from mfsample.config_checks import ConfigError
+  from mfsample.data import FILE_KINDS
+  from mfsample.planning.config import check_image_size
+  from mfsample.planning.pool import make_pool
+
+  planning = config.candidates.planning.copy_and_resolve_references()
+  with planning.unlocked():
+    planning.data.progress = bool(config.progress) and bool(planning.data.progress)
+  pool = make_pool(data_spec(planning.data))
+  num, height, width = np.shape(pool.candidates.images)[:3]
+  files = planning.data.path if planning.data.kind in FILE_KINDS else None
+  if max(int(v) for v in config.candidates.views) >= num:
+    raise ConfigError(f"config.candidates.views = {tuple(config.candidates.views)}: every "
+                      f"count must leave unused candidates (< {num}, the candidates of "
+                      + (f"the dataset at {files})" if files else "the pool)"))
+  check_image_size(planning, width, height, files, prefix="config.candidates.planning")
+  return pool
+
+
+def run_candidates(config, wd, bar=None, pool=None):
   """Runs (or resumes) the candidates part of `config` in the workdir's `candidates/`
-  (`wd`: a `mfsample.jobs.Workdir`; a missing or damaged case is computed again).
+  (`wd`: a `mfsample.jobs.Workdir`; a missing or damaged case is computed again), on
+  `pool` (default: `candidates_pool(config)`).
 
   Returns:
     {"scene", "seeds", "view_counts", "cases_per_row", "rows", "paired"}: a row per (round
@@ -60,14 +88,13 @@ def run_candidates(config, wd, bar=None):
     the per-case rho(U, error) (seed-major); `paired` as in `paired_differences`.
   """
   from mfsample.planning import runner
-  from mfsample.planning.pool import make_pool
   from mfsample.planning.u_error import u_against_error
 
   c = config.candidates
   planning = c.planning.copy_and_resolve_references()
   with planning.unlocked():
     planning.data.progress = bool(config.progress) and bool(planning.data.progress)
-  pool = make_pool(data_spec(planning.data))
+  pool = candidates_pool(config) if pool is None else pool
   counts = [int(v) for v in c.views]
   seeds = [int(s) for s in c.seeds]
   samples = [int(m) for m in c.samples]

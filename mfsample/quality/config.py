@@ -24,6 +24,7 @@ from mfsample.baselines.fisher import DEFAULT_GROUPS as FISHER_GROUPS
 from mfsample.data import FILE_KINDS
 from mfsample.data.datasets import kinds_offering
 from mfsample.planning import config as planning_variants
+from mfsample.planning.config import check_image_size
 from mfsample.planning.config import default_config as planning_config
 from mfsample.quality.benchmark import BASELINES, parse_sampler
 from mfsample.train.config import default_config as training_config
@@ -211,6 +212,9 @@ def validate(config):
           f"config.candidates.views = {tuple(counts)}: every count must leave unused "
           f"candidates (< candidates.planning.data.num_train = "
           f"{planning.data.num_train})")
+    if planning.data.kind not in FILE_KINDS:
+      check_image_size(planning, planning.data.width, planning.data.height,
+                       prefix="config.candidates.planning")
 
 
 def _check_samplers(config, field, min_length, single=False):

@@ -24,6 +24,8 @@ def run_uncertainty_quality(config, workdir):
   """
   t0 = time.perf_counter()
   with jobs.open_workdir(JOB, config, workdir) as wd:
+    # The candidates' pool is loaded and checked before any model of either part trains.
+    pool = candidates.candidates_pool(config) if config.candidates.enabled else None
     wd.write_config()
     results, markdown = {}, []
     if config.ause.enabled:
@@ -49,7 +51,7 @@ def run_uncertainty_quality(config, workdir):
       c = config.candidates
       bar = wd.progress(len(c.steps) * len(c.samplers) * len(c.seeds) * len(c.views),
                         "uncertainty quality (candidates)")
-      results["candidates"] = candidates.run_candidates(config, wd, bar)
+      results["candidates"] = candidates.run_candidates(config, wd, bar, pool)
       bar.close()
       markdown.append(tables.candidates_markdown(
           results["candidates"], f"## U against the round model's error at the candidates "

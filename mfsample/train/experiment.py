@@ -35,6 +35,8 @@ def train_and_evaluate(config, workdir):
 
   with jobs.open_workdir(JOB, config, workdir) as wd:
     dataset = data_lib.load_dataset(config_blocks.data_spec(config.data))
+    # Made before training: a network that cannot be loaded stops the run before it trains.
+    lpips_fn = metrics.make_lpips(config.eval.lpips_net) if config.eval.lpips_net else None
     wd.write_config()
     settings, _ = train_spec(config)
     extent = settings.extent
@@ -51,7 +53,6 @@ def train_and_evaluate(config, workdir):
     state, setup = result.state, result.setup
     wd.write_json("train_log.json", result.history, indent=2)
 
-    lpips_fn = metrics.make_lpips(config.eval.lpips_net) if config.eval.lpips_net else None
     model = state.model
     z = None
     if model.spec.stochastic and config.eval.uncertainty_samples > 0:

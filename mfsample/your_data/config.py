@@ -16,7 +16,7 @@ import ml_collections
 from mfsample import config_checks as checks
 from mfsample.config_blocks import data_spec
 from mfsample.data import resolve_path
-from mfsample.data.datasets import kinds_offering
+from mfsample.data.datasets import FILE_KINDS, kinds_offering
 from mfsample.samplers import STOCHASTIC_KINDS
 from mfsample.train import config as training_variants
 from mfsample.train.config import default_config as training_config
@@ -98,6 +98,37 @@ def validate(config):
     if not resolve_path(config.posthoc.ply).is_file():
       raise FileNotFoundError(f"config.posthoc.ply = {config.posthoc.ply!r}: no such file "
                               f"({resolve_path(config.posthoc.ply)})")
+  if data.kind not in FILE_KINDS:  # the views' count and size are the config's
+    check_views(config, data.num_train, data.width, data.height)
+
+
+def check_views(config, num_train, width, height, dataset=None):
+  """The rules of the views and candidates against the dataset's training views: `num_train`
+  of `width` x `height` pixels, the config's (`dataset` None) or those of the files at
+  `dataset`. `validate` calls it where the config gives them, the job once the data are
+  loaded; both before anything is trained.
+
+  Raises:
+    ConfigError: no unused candidate would be left, or the candidates' scoring size would be
+      under one pixel (naming the fields and the numbers).
+  """
+  every = int(config.views.train_every)
+  train = -(-int(num_train) // every)  # views 0, every, 2 every, ...
+  if config.next_views.candidates == "unused" and num_train - train < 1:
+    count = (f"config.data.num_train = {num_train}" if dataset is None else
+             f"the {num_train} training view(s) of the dataset at {dataset}")
+    raise checks.ConfigError(
+        f"{count} with config.views.train_every = {every} leaves no unused candidate view "
+        f"({train} train): the dataset needs more than {train} view(s), or set "
+        "next_views.candidates = 'sphere'")
+  down = int(config.next_views.score_downscale)
+  if down > min(width, height):
+    size = ("config.data.width x height" if dataset is None else
+            f"the images of the dataset at {dataset}")
+    raise checks.ConfigError(
+        f"config.next_views.score_downscale = {down}: the candidates are {width} x {height} "
+        f"pixels ({size}) and cannot be scored {down} times smaller (under one pixel); it "
+        f"must be <= {min(width, height)}")
 
 
 # ----------------------------------------------------------------- variants

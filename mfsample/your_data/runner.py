@@ -15,13 +15,16 @@
 5. writes the figure and the results.
 
 The workdir: `config.json` (a later call with a different config is refused, naming the
-fields), `checkpoints/`, `train_log.json`, `point_cloud.ply` (a trained field's mean),
-`test/` (renders, U maps as PNG and `uncertainty.npy`, `metrics.json`), `next_views.json`,
+fields), `inputs.json` (the files read: a later call whose files changed stops, or computes
+again as `data.inputs_changed` says), `checkpoints/`, `train_log.json`, `point_cloud.ply`
+(a trained field's mean), `test/` (renders, U maps as PNG and `uncertainty.npy`,
+`metrics.json`), `next_views.json`,
 `next_views/` (the proposals as nerfstudio `transforms.json` and `camera_path.json`, the 3DGS
 `cameras.json` SuperSplat imports, a COLMAP text model, and a mean render and U map each:
 `mfsample.your_data.export`), `uncertainty_ply/` (the model with its uncertainty per
 Gaussian over the candidates: `mfsample.your_data.uncertainty_ply`), `next_views.png` and
-`results.json`. A call on a finished workdir returns its results.
+`results.json`. A call on a finished workdir returns its results, while the files they
+point to are what it wrote (otherwise they are computed again, from the checkpoints).
 """
 
 import os
@@ -35,7 +38,7 @@ from mfsample.config_blocks import data_spec, speed_only_fields
 from mfsample.data import datasets, resolve_path
 from mfsample.jobs import Budgets
 from mfsample.samplers import sample_z
-from mfsample.your_data.config import validate
+from mfsample.your_data.config import check_views, validate
 
 
 def run_next_views(config, workdir):
@@ -53,12 +56,23 @@ def run_next_views(config, workdir):
     if finished is not None:
       return finished
     t0 = time.perf_counter()
-    dataset = datasets.load_dataset(data_spec(config.data))
-    wd.write_config()
+    spec = data_spec(config.data)
+    dataset = datasets.load_dataset(spec)
+    # What depends on the data alone is checked before anything is written or trained.
+    check_views(config, len(dataset.train), dataset.train.cameras.width,
+                dataset.train.cameras.height, spec.path)
     every = int(config.views.train_every)
     index = np.arange(len(dataset.train))
     train_idx, unused_idx = index[index % every == 0], index[index % every != 0]
     train_views = dataset.train.subset(train_idx)
+    center = 0.5 * (np.asarray(dataset.bounds[0], np.float64)
+                    + np.asarray(dataset.bounds[1], np.float64))
+    candidates = _candidates(config, dataset, train_idx, unused_idx, center)
+    lpips_fn = None
+    if config.eval.lpips_net:
+      from mfsample import metrics as metrics_lib
+      lpips_fn = metrics_lib.make_lpips(config.eval.lpips_net)
+    wd.write_config()
     result, kind = _train_or_fit(config, dataset, train_views, wd.file("checkpoints"))
     model, settings = result.state.model, result.setup.step_config.settings
     wd.write_json("train_log.json", result.history, indent=2)
@@ -70,10 +84,8 @@ def run_next_views(config, workdir):
     # starts from the training's budget (renders of one size share the compiled code).
     z = sample_z(model, int(config.next_views.samples), seed=int(config.next_views.z_seed))
     budgets = Budgets().replace(eval=settings, score=settings, mean=settings)
-    test = _test_maps(config, model, dataset, z, settings, wd)
-    center = 0.5 * (np.asarray(dataset.bounds[0], np.float64)
-                    + np.asarray(dataset.bounds[1], np.float64))
-    proposal = _propose(config, model, dataset, train_idx, unused_idx, center, z, budgets, wd)
+    test = _test_maps(config, model, dataset, z, settings, lpips_fn, wd)
+    proposal = _propose(config, model, dataset, train_idx, candidates, center, z, budgets, wd)
     wd.write_json("next_views.json", proposal["record"], indent=2)
     # Files only: the other processes of a multi-process run have nothing to compute here.
     files = {}
@@ -110,7 +122,10 @@ def run_next_views(config, workdir):
         "files": files,
         "seconds_this_call": time.perf_counter() - t0,
     }
-    wd.write_json("results.json", results, indent=2)
+    # Read back only while what it points to is what this call wrote.
+    wd.write_json("results.json", results, indent=2, files=(
+        "train_log.json", "point_cloud.ply", "test", "next_views.json", "next_views",
+        "uncertainty_ply", "next_views.png"))
     return results
 
 
@@ -151,13 +166,11 @@ def _train_or_fit(config, dataset, train_views, checkpoint_dir):
   return run_training(model, train_views, settings, **kw), "joint"
 
 
-def _test_maps(config, model, dataset, z, settings, wd):
+def _test_maps(config, model, dataset, z, settings, lpips_fn, wd):
   """Renders, U maps and metrics of every test view, with a progress bar; written to the
   workdir's `test/`. Returns {"metrics", "renders", "maps"}."""
-  from mfsample import metrics as metrics_lib
   from mfsample.train import evaluate as eval_lib
 
-  lpips_fn = metrics_lib.make_lpips(config.eval.lpips_net) if config.eval.lpips_net else None
   per_view = []
   bar = wd.progress(len(dataset.test), "test views")
   for i in range(len(dataset.test)):
@@ -201,17 +214,18 @@ def _candidates(config, dataset, train_idx, unused_idx, center):
   return cameras, None, [f"sphere_{i:03d}" for i in range(len(cameras))]
 
 
-def _propose(config, model, dataset, train_idx, unused_idx, center, z, budgets, wd):
-  """U of every candidate (progress bar), the top k with their renders and U maps, and the
-  record. With candidate images, the error of the mean render there and Spearman's rho of U
-  against it (`mfsample.planning.u_error`: U at the scoring size, the squared error at full
-  size; rho with the angle to the nearest training view beside it)."""
+def _propose(config, model, dataset, train_idx, candidates, center, z, budgets, wd):
+  """U of every candidate (`candidates`: `_candidates`; progress bar), the top k with their
+  renders and U maps, and the record. With candidate images, the error of the mean render
+  there and Spearman's rho of U against it (`mfsample.planning.u_error`: U at the scoring
+  size, the squared error at full size; rho with the angle to the nearest training view
+  beside it)."""
   from mfsample.planning.u_error import u_against_error
   from mfsample.selection import top_k
   from mfsample.your_data.export import preview
 
   nv = config.next_views
-  cameras, images, names = _candidates(config, dataset, train_idx, unused_idx, center)
+  cameras, images, names = candidates
   num = len(cameras)
   bar = wd.progress(num, "candidates")
   ranking = u_against_error(
