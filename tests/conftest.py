@@ -57,9 +57,13 @@ def _bounded_memory_maps():
   if counts is not None and counts[0] > counts[1] // 2:
     import gc
 
+    import chex
     import jax
 
     jax.clear_caches()
+    # A jitted function traces again after the clear: tests that count traces
+    # (chex.assert_max_traces) start counting afresh.
+    chex.clear_trace_counter()
     gc.collect()
 
 
