@@ -219,8 +219,8 @@ def test_two_processes_resume_train_and_score_as_one(reference, tiny_dataset):
   np.testing.assert_allclose(first["scores"], np.asarray(here.values), rtol=1e-5)
   # Only process 0 wrote: one set of results, no stray temporaries, the lock released.
   assert sorted(os.listdir(workdir)) == sorted(
-      ["checkpoints", "config.json", "images", "metrics.json", "point_cloud.ply",
-       "train_log.json"])
+      ["checkpoints", "config.json", "images", "inputs.json", "metrics.json",
+       "point_cloud.ply", "train_log.json"])
   assert [os.path.basename(p) for p in ckpt.list_checkpoints(
       os.path.join(workdir, "checkpoints"))] == ["ckpt_00000003.npz", "ckpt_00000006.npz"]
 

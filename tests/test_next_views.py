@@ -50,7 +50,7 @@ def test_the_viewer_reads_the_job_as_it_wrote_it(joint_run):
   """The viewer (`mfsample.viewer`) rebuilds the candidates from config.json as the job split
   them, reads the model from the checkpoint and finds the job's U of the first proposal."""
   from mfsample.viewer import open_run
-  from mfsample.viewer.models import render_colour, samples
+  from mfsample.viewer.models import render_u, samples
 
   workdir, _ = joint_run
   run = open_run(workdir)
@@ -68,8 +68,8 @@ def test_the_viewer_reads_the_job_as_it_wrote_it(joint_run):
   with open(os.path.join(workdir, "results.json")) as f:
     assert model.num_live == json.load(f)["live_gaussians"]
   num, seed = run.u_samples()
-  _, _, u, _ = render_colour(model, step.proposals[0].camera, samples(model, num, seed),
-                             run.background())
+  _, u, _ = render_u(model, step.proposals[0].camera, samples(model, num, seed),
+                     run.background())
   assert u == pytest.approx(record["top_k"][0]["u"], rel=1e-4)
   truth = run.ground_truth(step, "candidates", step.proposals[0].index)
   assert truth.shape == (32, 32, 3)
