@@ -107,7 +107,9 @@ def colmap(config):
   """A COLMAP capture (Mip-NeRF 360 layout): images_8, every 8th image a test view."""
   config.data.kind = "colmap"
   config.data.path = "data/capture"  # Point --config.data.path at the scene folder.
-  config.data.downscale = 8  # images_8/: Mip-NeRF 360's smallest copies (a CPU's size).
+  # images_8/: Mip-NeRF 360's smallest copies (a CPU's size); made from images/ when the
+  # capture has none (mfsample.data.downscaled).
+  config.data.downscale = 8
   config.data.background = (0.0, 0.0, 0.0)  # 3DGS's default for real captures.
   config.model.init_from = "points"  # 3DGS's start on real captures: the SfM points.
 
@@ -132,6 +134,7 @@ def tiny(config):
   config.next_views.k = 2
   config.next_views.samples = 4
   config.next_views.sphere_views = 6
+  config.posthoc.steps = 40  # (with posthoc: the B_hat fit as long as the training above)
 
 
 VARIANTS = {f.__name__: f for f in (colmap, posthoc, tiny)}
