@@ -80,10 +80,10 @@ def load_run(workdir, data=None):
 
   from mfsample._bench import require_scene_folder
   from mfsample.config_blocks import data_spec
+  from mfsample.config_record import WRITTEN_BY
   from mfsample.data import datasets as data_lib
   from mfsample.train import loop
   from mfsample.train.config import recipe
-  from mfsample.config_record import WRITTEN_BY
 
   with open(os.path.join(workdir, "config.json")) as f:
     record = json.load(f)

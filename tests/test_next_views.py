@@ -277,7 +277,8 @@ def test_a_three_view_nerfstudio_capture_end_to_end(tmp_path):
                "captured/01_" + results["top_k"][0]["name"] + ".png"):
     assert (workdir / "next_views" / name).exists(), name
   assert results["files"]["uncertainty_ply"] == ["uncertainty_ply/coloured_by_uncertainty.ply",
-                                                 "uncertainty_ply/model_colours.ply"]
+                                                 "uncertainty_ply/model_colours.ply",
+                                                 "uncertainty_ply/per_gaussian.ply"]
   assert all((workdir / p).stat().st_size > 1000 for p in results["files"]["uncertainty_ply"])
   # The command's summary on the finished workdir (read back, nothing recomputed).
   flags_ = [f"--config.{k}={v}" for k, v in overrides.items()]
@@ -298,20 +299,15 @@ BONSAI = pathlib.Path(os.environ.get("MFSAMPLE_REAL_DATA")
 @pytest.mark.slow
 @pytest.mark.skipif(not BONSAI.is_dir(), reason=f"bonsai capture not found at {BONSAI}")
 def test_the_three_frame_bonsai_capture(tmp_path):
-  """The real 3-frame COLMAP capture (Mip-NeRF 360 bonsai) through the colmap variant at
-  the tiny schedule, with an images_8 copy made here: valid JSON, undefined rho, the files."""
+  """The real 3-frame COLMAP capture (Mip-NeRF 360 bonsai, as 3DGS's convert.py leaves it:
+  images/ and sparse/0) through the colmap variant at the tiny schedule: images_8/ is made
+  from images/; valid JSON, undefined rho, the files."""
   import shutil
-
-  from PIL import Image
 
   pytest.importorskip("pycolmap")
   scene = tmp_path / "bonsai"
   shutil.copytree(BONSAI / "sparse", scene / "sparse")
-  (scene / "images_8").mkdir(parents=True)
-  for image in sorted((BONSAI / "images").iterdir()):
-    with Image.open(image) as im:
-      im.resize((round(im.width / 8), round(im.height / 8)), Image.BOX).save(
-          scene / "images_8" / (image.stem + ".png"))
+  shutil.copytree(BONSAI / "images", scene / "images")
   config = next_views_configs.get_config("colmap,tiny")
   config.data.kind = "colmap"
   config.data.path = str(scene)
@@ -327,3 +323,5 @@ def test_the_three_frame_bonsai_capture(tmp_path):
   assert "NaN" not in text and json.loads(text)["top_k"][0]["name"] == "DSCF5597"
   assert (workdir / "next_views" / "cameras.json").is_file()
   assert (workdir / "uncertainty_ply" / "coloured_by_uncertainty.ply").is_file()
+  assert sorted(p.name for p in (scene / "images_8").iterdir()) == [
+      "DSCF5574.JPG", "DSCF5575.JPG", "DSCF5597.JPG"]
