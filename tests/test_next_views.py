@@ -110,9 +110,17 @@ def test_colmap_capture_and_a_ply_get_posthoc_uncertainty(joint_run, tmp_path):
   config.posthoc.steps = 6
   config.views.train_every = 1
   config.next_views.candidates = "sphere"
+  config.posthoc.min_psnr = 99.0  # no model reaches it: the warning is given
   workdir = str(tmp_path / "posthoc")
-  results = run_next_views(config, workdir)
+  with pytest.warns(UserWarning, match=r"renders the test views at [\d.]+ dB PSNR, below "
+                    r"posthoc.min_psnr = 99: it does not reproduce this capture"):
+    results = run_next_views(config, workdir)
   assert results["kind"] == "posthoc" and results["steps"] == 6
+  assert len(results["warnings"]) == 1 and results["test"]["psnr"] < 99
+  from mfsample.your_data.runner import report
+
+  assert "  warning: the model of posthoc.ply" in report(results, workdir)
+  assert joint_run[1]["warnings"] == []  # (a trained field is never warned about)
   assert results["num_train_views"] == 9 and results["num_test_views"] == 3
   assert results["next_views"]["num_candidates"] == 6
   assert results["next_views"]["rho_u_error"] is None  # new poses have no images
@@ -283,10 +291,12 @@ def test_a_three_view_nerfstudio_capture_end_to_end(tmp_path):
   # The command's summary on the finished workdir (read back, nothing recomputed).
   flags_ = [f"--config.{k}={v}" for k, v in overrides.items()]
   env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}  # as a user runs it
-  out = subprocess.run(
+  run = subprocess.run(
       [sys.executable, str(ROOT / "experiments" / "next_views.py"),
        f"--config={ROOT / 'configs' / 'next_views.py'}:tiny", f"--workdir={workdir}", *flags_],
-      capture_output=True, text=True, cwd=ROOT, check=True, env=env).stdout
+      capture_output=True, text=True, cwd=ROOT, env=env)
+  assert run.returncode == 0, run.stderr[-3000:]
+  out = run.stdout
   assert "undefined (1 candidate(s)" in out and "nan" not in out.lower(), out
   assert "cameras.json for SuperSplat" in out
 

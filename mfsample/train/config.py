@@ -126,7 +126,6 @@ def tiny(config):
   config.train.num_steps = 40
   config.train.checkpoint_every = 20
   config.train.log_every = 10
-  config.train.progress = False
   config.densify.start = 10
   config.densify.every = 10
   config.densify.stop = 30

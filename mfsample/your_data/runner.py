@@ -8,7 +8,9 @@
 2. trains a stochastic field on them (`mfsample.train.run_training`), or, with `posthoc.ply`, fits
    B_hat to that model's frozen Gaussians (`mfsample.train.posthoc.fit_b_hat`); both
    checkpoint into `workdir/checkpoints` and a killed call resumes from there;
-3. renders every test view with its per-pixel U map (Eq. 10);
+3. renders every test view with its per-pixel U map (Eq. 10); a post-hoc model whose mean
+   renders them below `posthoc.min_psnr` does not reproduce the capture: a warning, and
+   `warnings` in the results, say so;
 4. scores the candidates (the unused views, or poses on a sphere) by U and proposes the top
    k; with candidate images, Spearman's rho of U against the model's error there
    (`mfsample.planning.u_error`) says how far to trust the ranking on this capture;
@@ -26,6 +28,7 @@ Gaussian over the candidates: `mfsample.your_data.uncertainty_ply`), `next_views
 
 import os
 import time
+import warnings
 
 import jax.numpy as jnp
 import numpy as np
@@ -53,6 +56,7 @@ def run_next_views(config, workdir):
     if finished is not None:
       return finished
     t0 = time.perf_counter()
+    wd.stage(f"loading the data ({config.data.kind})")
     dataset = datasets.load_dataset(data_spec(config.data))
     wd.write_config()
     every = int(config.views.train_every)
@@ -71,6 +75,7 @@ def run_next_views(config, workdir):
     z = sample_z(model, int(config.next_views.samples), seed=int(config.next_views.z_seed))
     budgets = Budgets().replace(eval=settings, score=settings, mean=settings)
     test = _test_maps(config, model, dataset, z, settings, wd)
+    warnings_ = _posthoc_warnings(config, kind, test["metrics"])
     center = 0.5 * (np.asarray(dataset.bounds[0], np.float64)
                     + np.asarray(dataset.bounds[1], np.float64))
     proposal = _propose(config, model, dataset, train_idx, unused_idx, center, z, budgets, wd)
@@ -78,6 +83,7 @@ def run_next_views(config, workdir):
     # Files only: the other processes of a multi-process run have nothing to compute here.
     files = {}
     if wd.writes:
+      wd.stage("writing the proposals and the uncertainty per Gaussian for viewers")
       files, budgets = _viewer_files(config, model, dataset, proposal, z, budgets, wd)
     if config.next_views.figure and wd.writes:
       from mfsample.your_data.figure import next_views_figure
@@ -108,10 +114,26 @@ def run_next_views(config, workdir):
         "top_k": [{"rank": t["rank"], "name": t["name"], "u": t["u"]}
                   for t in record["top_k"]],
         "files": files,
+        "warnings": warnings_,
         "seconds_this_call": time.perf_counter() - t0,
     }
     wd.write_json("results.json", results, indent=2)
     return results
+
+
+def _posthoc_warnings(config, kind, metrics):
+  """[message] when a post-hoc model does not reproduce its capture (test PSNR below
+  `posthoc.min_psnr`), each also issued as a warning."""
+  if kind != "posthoc" or not metrics["psnr"] < float(config.posthoc.min_psnr):
+    return []
+  message = (f"the model of posthoc.ply = {config.posthoc.ply!r} renders the test views at "
+             f"{metrics['psnr']:.1f} dB PSNR, below posthoc.min_psnr = "
+             f"{float(config.posthoc.min_psnr):g}: it does not reproduce this capture (a "
+             "model of another capture or world, or data.background = "
+             f"{tuple(config.data.background)} is not the one it was trained on), and its "
+             "U says little about it")
+  warnings.warn(message, stacklevel=3)
+  return [message]
 
 
 def _count(n, noun):
@@ -279,6 +301,7 @@ def report(results, workdir):
   ranking follows the model's error on this capture."""
   lines = [f"{results['kind']} uncertainty of {results['scene']}: test PSNR "
            f"{results['test']['psnr']:.2f} dB, mean U {results['test']['mean_u']:.4g}"]
+  lines += [f"  warning: {w}" for w in results.get("warnings", ())]
   lines += [f"  next view {t['rank']}: {t['name']} (U = {t['u']:.4g})" for t in results["top_k"]]
   nv = results["next_views"]
   if nv["candidates"] == "unused":  # candidates with images: U against the model's error
