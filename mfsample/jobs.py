@@ -291,9 +291,14 @@ def main(job: Job):
   # JAX reports at INFO each platform it probes and does not find ("Unable to initialize
   # backend 'tpu'"), which reads like an error; its warnings still show.
   logging.getLogger("jax._src.xla_bridge").setLevel(logging.WARNING)
-  # A warning is one line that names the job (not the source line that issued it).
+  # A warning is one line that names the job (not the source line that issued it), and so
+  # is a log line of the package (a capture's images_N/ made, ...).
   warnings.formatwarning = lambda message, category, *_, **__: (
       f"{job.name}: {category.__name__}: {message}\n")
+  plain = logging.StreamHandler(sys.stderr)
+  plain.setFormatter(logging.Formatter(f"{job.name}: %(message)s"))
+  logging.getLogger("mfsample").addHandler(plain)
+  logging.getLogger("mfsample").propagate = False  # (not again in absl's format)
 
   def run(argv):
     if len(argv) > 1:

@@ -124,8 +124,10 @@ from mfsample import jobs
 from mfsample.data import DatasetError
 
 def run(config, workdir):
+  import logging
   import jax
   jax.devices()
+  logging.getLogger("mfsample.data.downscaled").warning("/data: made images_8/")
   raise DatasetError("/data/x.json: 'fl_x' must be a finite number, got 'a'.")
 
 jobs.main(jobs.Job("toy", "toy", run, lambda c: None, free_fields=(), results=()))
@@ -151,5 +153,6 @@ def test_main_reports_bad_input_in_one_line_and_no_platform_probe(tmp_path, verb
     assert lines[-1].endswith("'fl_x' must be a finite number, got 'a'.")
   else:
     assert out.returncode == 2 and lines[1:] == [
+        "toy: /data: made images_8/",  # the package's log lines: plain, one each
         "toy: DatasetError: /data/x.json: 'fl_x' must be a finite number, got 'a'. "
         "(--verbose shows the traceback)"], out.stderr
