@@ -1,4 +1,4 @@
-"""The `mfsample` command of an installed package: every job and the viewer.
+"""The `mfsample` command of an installed package: every job, the viewer and render-ply.
 
 For example::
 
@@ -52,6 +52,8 @@ COMMANDS = {
                           "mfsample.your_data.runner", "next_views"),
     "viewer": Command("a job's workdir in the browser (the capture planner)",
                       "mfsample.viewer.command"),
+    "render-ply": Command("any 3DGS .ply, or a per-Gaussian property of it, rendered to PNG",
+                          "mfsample.your_data.render_ply_command"),
 }
 
 HELP = ("-h", "--help", "-help", "--helpshort", "-?")

@@ -35,6 +35,7 @@ a call with nothing to compute returns its results; one that has to write stops,
 import contextlib
 import dataclasses
 import json
+import logging
 import os
 import shutil
 import signal
@@ -217,6 +218,16 @@ class Workdir:
                     stacklevel=2)
       return None
     return arrays
+
+  def stage(self, message):
+    """Says in one line what the job does next (`job name: message`, on stderr), when the
+    config's progress flag is set (by process 0): long steps without a bar are not silent."""
+    from mfsample.config_checks import get_field
+
+    if self.writes and get_field(self.config, self.job.progress_field):
+      from tqdm import tqdm
+
+      tqdm.write(f"{self.job.name}: {message}", file=sys.stderr)
 
   def progress(self, total, desc=None, **kwargs):
     """A tqdm progress bar, shown when the config's progress flag is set (by process 0)."""
@@ -404,7 +415,20 @@ def main(job: Job):
   config_flag = config_flags.DEFINE_config_file("config", None, f"The {job.name} config file.",
                                                 lock_config=True)
   workdir_flag = flags.DEFINE_string("workdir", None, "Output directory.")
+  verbose_flag = flags.DEFINE_bool("verbose", False, "Show the traceback of an error in the "
+                                   "input (config, data, workdir) after its one-line message.")
   flags.mark_flags_as_required(["config", "workdir"])
+  # JAX reports at INFO each platform it probes and does not find ("Unable to initialize
+  # backend 'tpu'"), which reads like an error; its warnings still show.
+  logging.getLogger("jax._src.xla_bridge").setLevel(logging.WARNING)
+  # A warning is one line that names the job (not the source line that issued it), and so
+  # is a log line of the package (a capture's images_N/ made, ...).
+  warnings.formatwarning = lambda message, category, *_, **__: (
+      f"{job.name}: {category.__name__}: {message}\n")
+  plain = logging.StreamHandler(sys.stderr)
+  plain.setFormatter(logging.Formatter(f"{job.name}: %(message)s"))
+  logging.getLogger("mfsample").addHandler(plain)
+  logging.getLogger("mfsample").propagate = False  # (not again in absl's format)
 
   def run(argv):
     if len(argv) > 1:
@@ -416,6 +440,8 @@ def main(job: Job):
       sys.exit(2)
     workdir = workdir_flag.value
     resume = f"run the same command again to resume (the workdir {workdir} keeps the work done)"
+    if distributed.is_writer() and _shows_progress(job, config_flag.value):
+      print(f"{job.name}: starting (workdir {workdir})", file=sys.stderr, flush=True)
 
     def on_request(signum):
       name = signal.Signals(signum).name
@@ -432,7 +458,10 @@ def main(job: Job):
       print(f"{job.name}: interrupted; {resume}: what was finished is kept.", file=sys.stderr)
       sys.exit(130)
     except USER_ERRORS as e:
-      print(f"{job.name}: {type(e).__name__}: {e}", file=sys.stderr)
+      if verbose_flag.value:
+        raise
+      print(f"{job.name}: {type(e).__name__}: {e} (--verbose shows the traceback)",
+            file=sys.stderr)
       sys.exit(2)
     if job.report is not None and distributed.is_writer():  # (it reads what process 0 wrote)
       print(job.report(results, workdir))
@@ -440,6 +469,17 @@ def main(job: Job):
   app.run(run)
 
 
-# Errors in the user's input whose message says all: `main` prints it without a traceback.
-USER_ERRORS = (ConfigError, DatasetError, workdir_lib.WorkdirError,
+def _shows_progress(job, config):
+  from mfsample.config_checks import get_field
+
+  try:
+    return bool(get_field(config, job.progress_field))
+  except ConfigError:  # (reported by the job's validator)
+    return False
+
+
+# Errors in the user's input whose message says all (the file, the field): `main` prints it
+# in one line, the traceback only with --verbose. A missing file is one (the loaders' and
+# the validators' messages name it and the config field).
+USER_ERRORS = (ConfigError, DatasetError, FileNotFoundError, workdir_lib.WorkdirError,
                workdir_lib.WorkdirBusyError, distributed.DistributedError)

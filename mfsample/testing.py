@@ -55,14 +55,22 @@ def light_captures(cameras: Camera, lights, *, num_gaussians=150, seed=0, radius
   return capture_many(data.train_basis, lights)
 
 
-def write_tiny_capture(path, *, num_views=8, size=32, num_gaussians=200, seed=0):
+def write_tiny_capture(path, *, num_views=8, size=32, num_gaussians=200, seed=0,
+                       sparse="sparse/0", background=(1.0, 1.0, 1.0)):
   """A tiny COLMAP capture and the 3DGS model that made it, as files: stand-ins for yours.
 
   Random Gaussians (`mfsample.data.synthetic.synthetic_gaussians`, in [-0.6, 0.6]^3) are
-  rendered by `mfsample.render` from `num_views` cameras around them (`size` x `size`,
-  white background, the training default) and written with `mfsample.data.export_colmap`
-  (needs pycolmap), their centres as the sparse points; the Gaussians themselves go to
-  `point_cloud.ply` (3DGS layout): a "pretrained" model that renders the capture exactly.
+  rendered by `mfsample.render` from `num_views` cameras around them (`size` x `size`) and
+  written with `mfsample.data.export_colmap` (needs pycolmap), their centres as the sparse
+  points; the Gaussians themselves go to `point_cloud.ply` (3DGS layout): a "pretrained"
+  model that renders the capture exactly.
+
+  Args:
+    sparse: where the sparse model goes in the capture: "sparse/0" (COLMAP's mapper and
+      Mip-NeRF 360) or "sparse" (`colmap image_undistorter --output_type COLMAP`). Either
+      way the capture has `images/` only, no downscaled copies.
+    background: [3] colour the views are rendered on: white (the training configs'
+      default) or black (3DGS's default, the `colmap` variants').
 
   Returns:
     (capture folder, path of the .ply), both under `path`.
@@ -72,13 +80,18 @@ def write_tiny_capture(path, *, num_views=8, size=32, num_gaussians=200, seed=0)
   from mfsample.data import PointCloud, export_colmap
   from mfsample.data.ply import export_gaussians
 
+  if sparse not in ("sparse/0", "sparse"):
+    raise ValueError(f"sparse must be 'sparse/0' or 'sparse', got {sparse!r}")
   root = Path(path)
   gaussians = synthetic.synthetic_gaussians(num_gaussians, seed)
   views = synthetic.render_views(gaussians, synthetic.orbit_cameras(num_views, size, size),
-                                 (1.0, 1.0, 1.0))
+                                 tuple(float(c) for c in background))
   xyz = np.asarray(gaussians.means, np.float32)
   colors = np.clip(np.asarray(gaussians.sh)[:, 0] * 0.28209479177387814 + 0.5, 0.0, 1.0)
-  export_colmap(root / "capture", views.replace(names=()), PointCloud(xyz, colors),
-                overwrite=True)
+  model = export_colmap(root / "capture", views.replace(names=()), PointCloud(xyz, colors),
+                        overwrite=True)
+  if sparse == "sparse":  # the undistorter's layout: the model files directly in sparse/
+    for file in sorted(Path(model).iterdir()):
+      file.replace(Path(model).parent / file.name)
+    Path(model).rmdir()
   return root / "capture", export_gaussians(root / "point_cloud.ply", gaussians)
-

@@ -70,13 +70,18 @@ def _bounded_memory_maps():
 # ------------------------------------------------------------------------- compilation report
 # The suite's time is XLA compilation: the end of every run prints how many programs the test
 # processes traced and compiled (and how many compilations the persistent cache answered),
-# summed over the xdist workers, beside pytest's 15 slowest tests (`--durations=15`).
-# Subprocesses that tests start (the jobs' command lines) are not counted.
+# summed over the xdist workers, beside pytest's 15 slowest tests (`--durations=15`), and the
+# test files that take the most time with their share of compiling (where to look first when
+# the suite grows slow). Subprocesses that tests start (the jobs' command lines) are not
+# counted.
 
 _TRACE_EVENT = "/jax/core/compile/jaxpr_trace_duration"
 _COMPILE_EVENT = "/jax/core/compile/backend_compile_duration"  # compiled or read from cache
 _CACHE_HIT_EVENT = "/jax/compilation_cache/cache_hits"
 _compile_counts = {"traces": 0, "compile_requests": 0, "cache_hits": 0, "compile_seconds": 0.0}
+_compile_seconds_by_file = {}  # test file -> seconds its tests (and fixtures) spent compiling
+_current_file = [None]
+_seconds_by_file = {}  # test file -> seconds of its tests (setup, call and teardown)
 
 
 def _on_duration(event, duration_secs, **_):
@@ -85,6 +90,9 @@ def _on_duration(event, duration_secs, **_):
   elif event == _COMPILE_EVENT:
     _compile_counts["compile_requests"] += 1
     _compile_counts["compile_seconds"] += duration_secs
+    if _current_file[0] is not None:
+      _compile_seconds_by_file[_current_file[0]] = (
+          _compile_seconds_by_file.get(_current_file[0], 0.0) + duration_secs)
 
 
 def _on_event(event, **_):
@@ -97,19 +105,38 @@ def pytest_configure(config):
 
   monitoring.register_event_duration_secs_listener(_on_duration)
   monitoring.register_event_listener(_on_event)
-  config._mfsample_compile_counts = [] if not hasattr(config, "workerinput") else None
+  controller = not hasattr(config, "workerinput")
+  config._mfsample_compile_counts = [] if controller else None
+  config._mfsample_compile_by_file = [] if controller else None
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_protocol(item, nextitem):
+  _current_file[0] = item.location[0]
+  try:
+    return (yield)
+  finally:
+    _current_file[0] = None
+
+
+def pytest_runtest_logreport(report):
+  # On the controller this sees every worker's reports: the time of each file's tests.
+  name = report.location[0]
+  _seconds_by_file[name] = _seconds_by_file.get(name, 0.0) + report.duration
 
 
 def pytest_sessionfinish(session):
   if hasattr(session.config, "workeroutput"):  # an xdist worker: hand the counts over
     session.config.workeroutput["mfsample_compile_counts"] = dict(_compile_counts)
+    session.config.workeroutput["mfsample_compile_by_file"] = dict(_compile_seconds_by_file)
 
 
 @pytest.hookimpl(optionalhook=True)
 def pytest_testnodedown(node, error):
-  counts = getattr(node, "workeroutput", {}).get("mfsample_compile_counts")
-  if counts is not None:
-    node.config._mfsample_compile_counts.append(counts)
+  output = getattr(node, "workeroutput", {})
+  if output.get("mfsample_compile_counts") is not None:
+    node.config._mfsample_compile_counts.append(output["mfsample_compile_counts"])
+    node.config._mfsample_compile_by_file.append(output.get("mfsample_compile_by_file", {}))
 
 
 def pytest_terminal_summary(terminalreporter, config):
@@ -121,6 +148,17 @@ def pytest_terminal_summary(terminalreporter, config):
       f"{total['traces']} traces, {compiled} programs compiled "
       f"({total['cache_hits']} more read from the persistent cache), "
       f"{total['compile_seconds']:.0f} s compiling, in {len(runs)} test process(es)")
+  compiling = {}
+  for by_file in config._mfsample_compile_by_file or [_compile_seconds_by_file]:
+    for name, secs in by_file.items():
+      compiling[name] = compiling.get(name, 0.0) + secs
+  seconds = _seconds_by_file
+  if seconds:
+    slowest = sorted(seconds, key=seconds.get, reverse=True)[:10]
+    terminalreporter.write_line("slowest test files (seconds of tests, of which compiling):")
+    for name in slowest:
+      terminalreporter.write_line(
+          f"  {seconds[name]:7.1f} {compiling.get(name, 0.0):7.1f}  {name}")
 
 
 # ------------------------------------------------------------------------- training fixtures

@@ -113,7 +113,8 @@ def test_help_lists_the_commands_and_each_job_its_variants(capsys):
   for name in cli.COMMANDS:
     cli.main(["mfsample", name, "--help"])
     text = capsys.readouterr().out
-    assert f"mfsample {name} " in text and "--workdir" in text
+    assert f"mfsample {name} " in text
+    assert "--workdir" in text or name == "render-ply"  # the one command without a workdir
     if cli.COMMANDS[name].config:
       for variant in cli.config_module(cli.COMMANDS[name]).VARIANTS:
         assert f"\n  {variant} " in text, (name, variant)

@@ -263,3 +263,44 @@ def test_a_read_only_workdir_is_read_and_a_call_that_must_write_it_is_refused(tm
                              f"{other}: ")
   assert lines[3].startswith(f"WorkdirReadOnlyError {root / 'new'} is read-only (")
   assert sorted(str(p) for p in root.rglob("*")) == before  # not even a lock file
+
+
+# A job whose run initialises JAX's backend (the platform probe) and then meets bad input.
+_PROBING_JOB = """
+import sys
+from mfsample import jobs
+from mfsample.data import DatasetError
+
+def run(config, workdir):
+  import logging
+  import jax
+  jax.devices()
+  logging.getLogger("mfsample.data.downscaled").warning("/data: made images_8/")
+  raise DatasetError("/data/x.json: 'fl_x' must be a finite number, got 'a'.")
+
+jobs.main(jobs.Job("toy", "toy", run, lambda c: None, free_fields=(), results=()))
+"""
+
+
+@pytest.mark.parametrize("verbose", [False, True])
+def test_main_reports_bad_input_in_one_line_and_no_platform_probe(tmp_path, verbose):
+  import subprocess
+  import sys
+
+  config = tmp_path / "config.py"
+  config.write_text("import ml_collections\n\ndef get_config():\n"
+                    "  return ml_collections.ConfigDict({'progress': True})\n")
+  args = [f"--config={config}", f"--workdir={tmp_path / 'w'}"] + ["--verbose"] * verbose
+  out = subprocess.run([sys.executable, "-c", _PROBING_JOB, *args], capture_output=True,
+                       text=True, timeout=120)
+  lines = out.stderr.strip().splitlines()
+  assert "Unable to initialize backend" not in out.stderr  # JAX's INFO probe lines
+  assert lines[0] == f"toy: starting (workdir {tmp_path / 'w'})"
+  if verbose:
+    assert out.returncode == 1 and "Traceback" in out.stderr
+    assert lines[-1].endswith("'fl_x' must be a finite number, got 'a'.")
+  else:
+    assert out.returncode == 2 and lines[1:] == [
+        "toy: /data: made images_8/",  # the package's log lines: plain, one each
+        "toy: DatasetError: /data/x.json: 'fl_x' must be a finite number, got 'a'. "
+        "(--verbose shows the traceback)"], out.stderr

@@ -169,7 +169,7 @@ def test_images_n_scales_the_intrinsics(tmp_path):
   expected = np.stack([np.round(area_downscale(im, 2) * 255) / 255 for im in views.images])
   np.testing.assert_allclose(half.images, expected, atol=1e-6)
   with pytest.raises(FileNotFoundError, match="images_4"):
-    load_nerfstudio(tmp_path, factor=4)
+    load_nerfstudio(tmp_path, factor=4, make_downscaled=False)  # (test_downscaled.py: made)
 
 
 def _edit(root, change):

@@ -110,9 +110,17 @@ def test_colmap_capture_and_a_ply_get_posthoc_uncertainty(joint_run, tmp_path):
   config.posthoc.steps = 6
   config.views.train_every = 1
   config.next_views.candidates = "sphere"
+  config.posthoc.min_psnr = 99.0  # no model reaches it: the warning is given
   workdir = str(tmp_path / "posthoc")
-  results = run_next_views(config, workdir)
+  with pytest.warns(UserWarning, match=r"renders the test views at [\d.]+ dB PSNR, below "
+                    r"posthoc.min_psnr = 99: it does not reproduce this capture"):
+    results = run_next_views(config, workdir)
   assert results["kind"] == "posthoc" and results["steps"] == 6
+  assert len(results["warnings"]) == 1 and results["test"]["psnr"] < 99
+  from mfsample.your_data.runner import report
+
+  assert "  warning: the model of posthoc.ply" in report(results, workdir)
+  assert joint_run[1]["warnings"] == []  # (a trained field is never warned about)
   assert results["num_train_views"] == 9 and results["num_test_views"] == 3
   assert results["next_views"]["num_candidates"] == 6
   assert results["next_views"]["rho_u_error"] is None  # new poses have no images
@@ -159,7 +167,7 @@ def test_a_posthoc_model_replaced_at_its_path_stops_the_rerun_or_is_recomputed(j
   of the new model."""
   import shutil
 
-  from mfsample.data.ply import load_ply, ply_arrays, write_ply
+  from mfsample.data.ply import load_ply, write_gaussians_ply
   from mfsample.workdir import InputsChangedError
 
   ply = tmp_path / "point_cloud.ply"
@@ -175,7 +183,7 @@ def test_a_posthoc_model_replaced_at_its_path_stops_the_rerun_or_is_recomputed(j
     assert list(json.load(f)["files"]) == [str(ply)]  # (synthetic data: no files)
   retrained = load_ply(ply)
   retrained["opacity_logits"] = retrained["opacity_logits"] - 1.0  # same size, other model
-  write_ply(ply, ply_arrays(retrained))
+  write_gaussians_ply(ply, retrained)
   results = os.path.join(workdir, "results.json")
   before = os.stat(results).st_mtime_ns
   with pytest.raises(InputsChangedError, match=rf"{ply}: modified .*, sha256 \w+ -> \w+\. "
@@ -214,7 +222,7 @@ def test_a_finished_workdir_on_a_read_only_mount_is_read_back(joint_run, tmp_pat
   assert unfinished.stderr.strip().splitlines()[-1] == (
       f"next views: WorkdirReadOnlyError: {mount / 'unfinished'} is read-only, and this next "
       "views call has results to compute and write (config.json): make it writable, or use "
-      "another --workdir")
+      "another --workdir (--verbose shows the traceback)")
   assert "Traceback" not in unfinished.stderr
   viewer = run_read_only(mount, [sys.executable, "-c", "import sys\n"
                                  "from mfsample.viewer import open_run\n"
@@ -421,15 +429,18 @@ def test_a_three_view_nerfstudio_capture_end_to_end(tmp_path):
                "captured/01_" + results["top_k"][0]["name"] + ".png"):
     assert (workdir / "next_views" / name).exists(), name
   assert results["files"]["uncertainty_ply"] == ["uncertainty_ply/coloured_by_uncertainty.ply",
-                                                 "uncertainty_ply/model_colours.ply"]
+                                                 "uncertainty_ply/model_colours.ply",
+                                                 "uncertainty_ply/per_gaussian.ply"]
   assert all((workdir / p).stat().st_size > 1000 for p in results["files"]["uncertainty_ply"])
   # The command's summary on the finished workdir (read back, nothing recomputed).
   flags_ = [f"--config.{k}={v}" for k, v in overrides.items()]
   env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}  # as a user runs it
-  out = subprocess.run(
+  run = subprocess.run(
       [sys.executable, str(ROOT / "experiments" / "next_views.py"),
        f"--config={ROOT / 'configs' / 'next_views.py'}:tiny", f"--workdir={workdir}", *flags_],
-      capture_output=True, text=True, cwd=ROOT, check=True, env=env).stdout
+      capture_output=True, text=True, cwd=ROOT, env=env)
+  assert run.returncode == 0, run.stderr[-3000:]
+  out = run.stdout
   assert "undefined (1 candidate(s)" in out and "nan" not in out.lower(), out
   assert "cameras.json for SuperSplat" in out
 
@@ -442,20 +453,15 @@ BONSAI = pathlib.Path(os.environ.get("MFSAMPLE_REAL_DATA")
 @pytest.mark.slow
 @pytest.mark.skipif(not BONSAI.is_dir(), reason=f"bonsai capture not found at {BONSAI}")
 def test_the_three_frame_bonsai_capture(tmp_path):
-  """The real 3-frame COLMAP capture (Mip-NeRF 360 bonsai) through the colmap variant at
-  the tiny schedule, with an images_8 copy made here: valid JSON, undefined rho, the files."""
+  """The real 3-frame COLMAP capture (Mip-NeRF 360 bonsai, as 3DGS's convert.py leaves it:
+  images/ and sparse/0) through the colmap variant at the tiny schedule: images_8/ is made
+  from images/; valid JSON, undefined rho, the files."""
   import shutil
-
-  from PIL import Image
 
   pytest.importorskip("pycolmap")
   scene = tmp_path / "bonsai"
   shutil.copytree(BONSAI / "sparse", scene / "sparse")
-  (scene / "images_8").mkdir(parents=True)
-  for image in sorted((BONSAI / "images").iterdir()):
-    with Image.open(image) as im:
-      im.resize((round(im.width / 8), round(im.height / 8)), Image.BOX).save(
-          scene / "images_8" / (image.stem + ".png"))
+  shutil.copytree(BONSAI / "images", scene / "images")
   config = next_views_configs.get_config("colmap,tiny")
   config.data.kind = "colmap"
   config.data.path = str(scene)
@@ -471,3 +477,5 @@ def test_the_three_frame_bonsai_capture(tmp_path):
   assert "NaN" not in text and json.loads(text)["top_k"][0]["name"] == "DSCF5597"
   assert (workdir / "next_views" / "cameras.json").is_file()
   assert (workdir / "uncertainty_ply" / "coloured_by_uncertainty.ply").is_file()
+  assert sorted(p.name for p in (scene / "images_8").iterdir()) == [
+      "DSCF5574.JPG", "DSCF5575.JPG", "DSCF5597.JPG"]

@@ -1,5 +1,8 @@
 """Tests of mfsample.data.ply: the standard 3DGS layout through plyfile, both ways."""
 
+import os
+from pathlib import Path
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -14,7 +17,9 @@ from mfsample.data.ply import (
   load_ply,
   ply_arrays,
   read_ply_data,
+  read_vertex_table,
   sh_degree_of,
+  write_gaussians_ply,
 )
 from mfsample.groups import GROUPS
 from mfsample.model import init_model, mean_gaussians, model_from_mean
@@ -51,17 +56,90 @@ def _write(path, columns, text=False, byte_order="<"):
   return path
 
 
-def test_layout_is_the_reference_one(tmp_path):
+# The reference layout's properties, in order.
+REFERENCE = (["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"]
+             + [f"f_rest_{i}" for i in range(45)] + ["opacity"]
+             + [f"scale_{i}" for i in range(3)] + [f"rot_{i}" for i in range(4)])
+
+
+def fixed_records(path):
+  """[N, 62] float32: a .ply read as the reference SIBR viewer reads it, trusting nothing of
+  the header but the vertex count: fixed records of 62 little-endian floats after it."""
+  data = Path(path).read_bytes()
+  head, body = data.split(b"end_header\n", 1)
+  count = int(next(line.split()[2] for line in head.decode().splitlines()
+                   if line.startswith("element vertex")))
+  return np.frombuffer(body[:count * 62 * 4], "<f4").reshape(count, 62)
+
+
+@pytest.mark.parametrize("sh_degree", [0, 1, 3])
+def test_layout_is_the_reference_one(tmp_path, sh_degree):
   path = tmp_path / "model.ply"
-  export_ply(path, _model(sh_degree=3))
+  export_ply(path, _model(sh_degree=sh_degree))
   header = path.read_bytes().split(b"end_header")[0].decode()
   names = [line.split()[-1] for line in header.splitlines() if line.startswith("property")]
-  assert names == (["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"]
-                   + [f"f_rest_{i}" for i in range(45)] + ["opacity"]
-                   + [f"scale_{i}" for i in range(3)] + [f"rot_{i}" for i in range(4)])
+  assert names == REFERENCE
   assert "format binary_little_endian 1.0" in header and "element vertex 5" in header
   assert all(line.split()[1] == "float" for line in header.splitlines()
              if line.startswith("property"))
+  assert len(path.read_bytes().split(b"end_header\n")[1]) == 5 * 62 * 4  # nothing after
+
+
+@pytest.mark.parametrize("sh_degree", [1, 3])
+def test_fixed_records_hold_the_model(tmp_path, sh_degree):
+  """Read as fixed 62-float records, the file gives the model's positions, SH (padded with
+  zeros per channel to degree 3), opacities, scales and rotations, normals zero."""
+  model = _model(sh_degree)
+  path = export_ply(tmp_path / "model.ply", model)
+  records = fixed_records(path)
+  mean = {g: np.asarray(v)[:5] for g, v in model.params.mean.items()}
+  np.testing.assert_array_equal(records[:, 0:3], mean["means"])
+  np.testing.assert_array_equal(records[:, 3:6], 0.0)
+  np.testing.assert_array_equal(records[:, 6:9], mean["sh_dc"])
+  rest = records[:, 9:54].reshape(5, 3, 15)  # [N, channel, coefficient]
+  k = (sh_degree + 1) ** 2 - 1
+  np.testing.assert_array_equal(rest[:, :, :k], np.transpose(mean["sh_rest"], (0, 2, 1)))
+  np.testing.assert_array_equal(rest[:, :, k:], 0.0)
+  np.testing.assert_array_equal(records[:, 54], mean["opacity_logits"])
+  np.testing.assert_array_equal(records[:, 55:58], mean["log_scales"])
+  np.testing.assert_array_equal(records[:, 58:62], mean["quats"])
+
+
+def test_the_degree_comes_back_from_the_comment_only_over_zero_padding(tmp_path):
+  """A degree-1 model is written padded and read as degree 1; a file whose higher bands
+  hold values (another tool edited it) is read with all of them; without the comment (the
+  reference code's files) the f_rest count decides."""
+  path = export_ply(tmp_path / "model.ply", _model(sh_degree=1))
+  assert b"comment sh_degree 1" in path.read_bytes().split(b"end_header")[0]
+  assert load_ply(path)["sh_rest"].shape == (5, 3, 3)
+  table = read_vertex_table(path)
+  table["f_rest_20"] = 0.5
+  edited = _write(tmp_path / "edited.ply", {k: table[k] for k in table.dtype.names})
+  data = edited.read_bytes().replace(b"ply\nformat binary_little_endian 1.0\n",
+                                     b"ply\nformat binary_little_endian 1.0\n"
+                                     b"comment sh_degree 1\n", 1)
+  edited.write_bytes(data)
+  assert load_ply(edited)["sh_rest"].shape == (5, 15, 3)
+  table = read_vertex_table(path)
+  bare = _write(tmp_path / "bare.ply", {k: table[k] for k in table.dtype.names})
+  assert load_ply(bare)["sh_rest"].shape == (5, 15, 3)
+
+
+# The reference code's own file (../shared/data/real beside the checkout, or
+# $MFSAMPLE_REAL_DATA): INRIA's point_cloud.ply of 9080 Gaussians, SH degree 3.
+INRIA = (Path(os.environ.get("MFSAMPLE_REAL_DATA")
+              or Path(__file__).resolve().parents[2] / "shared" / "data" / "real")
+         / "inria_ply" / "point_cloud_iter7000.ply")
+
+
+@pytest.mark.skipif(not INRIA.is_file(), reason=f"INRIA's .ply not found at {INRIA}")
+def test_a_reference_file_is_written_back_byte_for_byte(tmp_path):
+  """The reference code's file, read and written again: the same records, bit for bit."""
+  mean = load_ply(INRIA)
+  path = write_gaussians_ply(tmp_path / "again.ply", mean)
+  original = fixed_records(INRIA)
+  assert original.shape == (9080, 62)
+  np.testing.assert_array_equal(fixed_records(path), original)
 
 
 @pytest.mark.parametrize("sh_degree", [0, 1, 3])
@@ -168,7 +246,8 @@ def test_malformed_files_are_refused_naming_file_and_property(tmp_path):
 def test_ply_arrays_write_live_rows_only():
   model = _model(sh_degree=0)
   arrays = ply_arrays(model.params.mean, model.mask)
-  assert len(arrays["x"]) == 5 and "f_rest_0" not in arrays
+  assert len(arrays["x"]) == 5 and list(arrays) == REFERENCE
+  assert all(not np.any(arrays[f"f_rest_{j}"]) for j in range(45))
 
 
 def test_gaussians_round_trip_through_raw_parameters(tmp_path):

@@ -13,7 +13,7 @@ import pytest
 
 import mfsample as mf
 from mfsample.data import datasets, load_colmap, load_ply
-from mfsample.data.ply import ply_arrays, raw_from_gaussians, write_ply
+from mfsample.data.ply import raw_from_gaussians, write_gaussians_ply
 from mfsample.model import model_from_mean
 from mfsample.train import checkpoint as ckpt
 from mfsample.train.posthoc import POSTHOC_VOLUME_WEIGHT, posthoc_settings, run_b_hat_fit
@@ -62,7 +62,7 @@ def pretrained(tmp_path_factory):
            "sh_dc": np.zeros((m, 3))}
   mean = {g: np.concatenate([raw[g], extra[g]]) for g in raw}
   mean["sh_rest"] = np.zeros((200 + m, 3, 3))
-  path = write_ply(root / "model.ply", ply_arrays(mean))
+  path = write_gaussians_ply(root / "model.ply", mean)
   return views, path, _fit(views, path)
 
 

@@ -1,11 +1,13 @@
-"""Uncertainty in .ply files: the standard layout with extra properties, geometry untouched,
-and a render of the coloured file that lights up where an unseen view's U map does."""
+"""Uncertainty in .ply files: splat files in the reference layout (62-float records, geometry
+untouched), the uncertainty per Gaussian beside them, and a render of the coloured file that
+lights up where an unseen view's U map does."""
 
 
 import jax.numpy as jnp
 import numpy as np
 import pytest
 from planning_testlib import tiny_pool, trained_one_view
+from test_ply import fixed_records
 
 from mfsample import render
 from mfsample import view_uncertainty as unc
@@ -32,34 +34,46 @@ def written(tmp_path_factory):
   per = gaussian_uncertainty(model, pool.candidates.cameras[np.asarray(others)], z,
                              settings=trained.settings, background=bg)
   directory = tmp_path_factory.mktemp("uply")
-  coloured, own = write_uncertainty_plys(directory, model, per)
-  return model, per, coloured, own, pool.candidates.cameras[target], z, trained.settings, bg
+  coloured, own, extras = write_uncertainty_plys(directory, model, per)
+  return (model, per, coloured, own, extras, pool.candidates.cameras[target], z,
+          trained.settings, bg)
 
 
 @pytest.mark.slow
 def test_files_keep_the_geometry_and_carry_the_uncertainty(written):
-  model, per, coloured, own, *_ = written
+  model, per, coloured, own, extras, *_ = written
   live = np.asarray(model.mask)
+  mean = {g: np.asarray(v)[live] for g, v in model.params.mean.items()}
   for path in (coloured, own):
-    table = read_vertex_table(path)
-    names = table.dtype.names
-    assert names[:6] == ("x", "y", "z", "nx", "ny", "nz") and names[-3:] == (
-        "u_share", "position_std", "colour_std")
-    np.testing.assert_array_equal(table["u_share"], per.share[live])
-    np.testing.assert_array_equal(table["position_std"], per.position_std[live])
-    np.testing.assert_array_equal(table["colour_std"], per.colour_std[live])
-    raw = load_ply(path)  # extra properties are skipped by the reader
+    records = fixed_records(path)  # as the reference SIBR viewer reads them
+    assert records.shape == (int(live.sum()), 62)
+    np.testing.assert_array_equal(records[:, 0:3], mean["means"])
+    np.testing.assert_array_equal(records[:, 54], mean["opacity_logits"])
+    np.testing.assert_array_equal(records[:, 55:58], mean["log_scales"])
+    np.testing.assert_array_equal(records[:, 58:62], mean["quats"])
+    raw = load_ply(path)  # and as readers by property name do
     for group in ("means", "log_scales", "quats", "opacity_logits"):
-      np.testing.assert_array_equal(raw[group], np.asarray(model.params.mean[group])[live])
-  np.testing.assert_array_equal(load_ply(own)["sh_dc"], np.asarray(
-      model.params.mean["sh_dc"])[live])
+      np.testing.assert_array_equal(raw[group], mean[group])
+  records = fixed_records(own)
+  np.testing.assert_array_equal(records[:, 6:9], mean["sh_dc"])
+  rest = records[:, 9:54].reshape(-1, 3, 15)
+  sh_rest = mean.get("sh_rest", np.zeros((len(records), 0, 3), np.float32))
+  k = sh_rest.shape[1]
+  np.testing.assert_array_equal(rest[:, :, :k], np.transpose(sh_rest, (0, 2, 1)))
+  assert not np.any(rest[:, :, k:]) and not np.any(fixed_records(coloured)[:, 9:54])
+  table = read_vertex_table(extras)  # the uncertainty, row for row
+  assert table.dtype.names == ("x", "y", "z", "u_share", "position_std", "colour_std")
+  np.testing.assert_array_equal(np.stack([table[a] for a in "xyz"], -1), mean["means"])
+  np.testing.assert_array_equal(table["u_share"], per.share[live])
+  np.testing.assert_array_equal(table["position_std"], per.position_std[live])
+  np.testing.assert_array_equal(table["colour_std"], per.colour_std[live])
 
 
 @pytest.mark.slow
 def test_the_coloured_file_lights_up_where_an_unseen_view_is_uncertain(written):
   """Rendered from a view none of the shares came from, the brightest Gaussians of the
   coloured file sit where that view's U map is high."""
-  model, per, coloured, _, camera, z, settings, bg = written
+  model, per, coloured, _, _, camera, z, settings, bg = written
   raw = load_ply(coloured)
   gaussians = activate({g: jnp.asarray(v) for g, v in raw.items()}, None,
                        jnp.asarray(3, jnp.int32))

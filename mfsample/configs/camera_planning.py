@@ -16,7 +16,9 @@ e.g. `--config=lego,rounds2000` (`--config=configs/camera_planning.py:lego,round
   densified_final  final models trained 2000 steps with 3DGS densification.
   paper_scale      lego's final models at the paper's scale (400 x 400, 100k points, 7000
                    densified steps; a GPU job), on round models at 40 x 40.
-  tiny             seconds-long: random ground-truth Gaussians at 24 x 24, 3 views.
+  tiny             random ground-truth Gaussians at 24 x 24, 3 views, every strategy: 2.5
+                   minutes of wall-clock on two CPU cores shared with other work (80 s of
+                   CPU time), nearly all of it compilation.
 
 Seeds and strategies are overrides, e.g. `--config.seeds="(0,1,2,3,4,5,6,7)"
 --config.strategies="('farthest','ours_sel')"`; docs/camera_planning.md lists each study.

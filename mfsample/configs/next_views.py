@@ -14,7 +14,8 @@ Variants combine, comma-separated (the defaults and a comment on every field:
            --config.data.kind=nerfstudio, an ns-process-data capture the same way.
   posthoc  a 3DGS model trained on every view (--config.posthoc.ply): B_hat fitted to it,
            candidates on a sphere around the scene.
-  tiny     seconds-long: random ground-truth Gaussians at 32 x 32, 40 steps (tests).
+  tiny     random ground-truth Gaussians at 32 x 32, 40 steps (tests): 76 s of wall-clock on
+           two CPU cores shared with other work (37 s of CPU time), nearly all compilation.
 
 docs/your_data.md has the commands.
 """

@@ -13,7 +13,8 @@ Variants combine, comma-separated::
               point `--config.candidates.planning.data.path` at the scene folder).
   posthoc     the jointly trained rank-2 field against B_hat fitted post hoc (400 steps) to
               the deterministic model of the same views and seed (`ause.baselines`).
-  tiny        both parts at a tiny size: random ground-truth Gaussians at 24 x 24.
+  tiny        both parts at a tiny size: random ground-truth Gaussians at 24 x 24; 99 s of
+              wall-clock on two CPU cores shared with other work (64 s of CPU time).
 
 Everything else is an override, e.g. `--config.ause.samplers="('lowrank:2','diagonal')"`
 or `--config.candidates.samplers="('lowrank:2','lowrank:10','diagonal')"`.

@@ -140,6 +140,11 @@ def _png_header(path):
   return head[24], head[25]
 
 
+def png_bit_depth(path):
+  """Bits per channel of a PNG file (1-16), or None for a file that is not a PNG."""
+  return _png_header(path)[0]
+
+
 def _read_png16(path):
   """[H, W, C] uint16 of a 16-bit PNG (pypng: exact; tRNS becomes an alpha channel)."""
   try:

@@ -4,7 +4,8 @@ The layout of COLMAP's output, of Mip-NeRF 360 and of every 3DGS tool:
 
   scene/
     images/            the photographs (the names the sparse model refers to)
-    images_2/ ...      optional pre-downscaled copies (Mip-NeRF 360 ships 2, 4 and 8)
+    images_2/ ...      downscaled copies (Mip-NeRF 360 ships 2, 4 and 8; a missing one is
+                       made from images/ when read: `mfsample.data.downscaled`)
     sparse/0/          cameras, images, points3D (.bin or .txt; rigs and frames in COLMAP 3.12+)
 
 Conventions, as read here:
@@ -42,7 +43,7 @@ import numpy as np
 
 from mfsample import arg_checks, fingerprints
 from mfsample.camera import Camera
-from mfsample.data import _io, colmap_files
+from mfsample.data import _io, colmap_files, downscaled
 from mfsample.data.views import Views
 
 # Camera models read as pinholes: {model: number of leading focal / principal point
@@ -154,13 +155,17 @@ def read_reconstruction(sparse):
     raise _io.DatasetError(f"{sparse}: cannot read the COLMAP model ({e}).") from e
 
 
-def load_colmap(path, *, factor=1, sparse=None, background=(1.0, 1.0, 1.0)):
+def load_colmap(path, *, factor=1, sparse=None, background=(1.0, 1.0, 1.0),
+                make_downscaled=True):
   """Loads a COLMAP capture: posed images and the sparse points.
 
   Args:
     path: the scene folder, holding `images/` (or `images_{factor}/`) and the sparse model.
-    factor: read the pre-downscaled `images_{factor}/` folder (1: `images/`); intrinsics are
+    factor: read the downscaled `images_{factor}/` folder (1: `images/`); intrinsics are
       scaled to the size of the images found there.
+    make_downscaled: when `images_{factor}/` is missing, make it from `images/`
+      (`mfsample.data.downscaled`: Lanczos, written beside it once, with a log line);
+      False: refuse it.
     sparse: the sparse model folder (default: `sparse/0`, else `sparse`, else `path`).
     background: [3] colour that images with an alpha channel are composited on.
 
@@ -170,7 +175,8 @@ def load_colmap(path, *, factor=1, sparse=None, background=(1.0, 1.0, 1.0)):
     image name, and the model's `PointCloud` ordered by point id.
 
   Raises:
-    FileNotFoundError: a missing folder, model file or image (named in the message).
+    FileNotFoundError: a missing folder, model file or image (named in the message);
+      `downscaled.MissingImageFolder` when `images_{factor}/` is missing and not made.
     DatasetError (a ValueError): a distorted or non-perspective camera (named, with how to
       undistort), unreadable model files, images of different sizes, images whose size is not
       a scaled copy of the camera's, non-finite poses.
@@ -183,23 +189,27 @@ def load_colmap(path, *, factor=1, sparse=None, background=(1.0, 1.0, 1.0)):
     raise ValueError(f"background must be 3 finite numbers, got {background!r}")
   sparse = find_sparse(root) if sparse is None else Path(sparse)
   recon = read_reconstruction(sparse)
-  image_dir = root / ("images" if factor == 1 else f"images_{int(factor)}")
-  if not image_dir.is_dir():
-    found = sorted(p.name for p in root.glob("images*") if p.is_dir())
-    raise FileNotFoundError(f"image folder for factor={factor} not found: {image_dir} (image "
-                            f"folders in {root}: {', '.join(found) or 'none'}).")
-
   entries = sorted(((im.name, im) for im in recon.images.values() if _has_pose(im)),
                    key=lambda e: e[0])
   if not entries:
     raise _io.DatasetError(f"{sparse}: the model has no posed images.")
   _check_view_names([name for name, _ in entries], sparse)
-  intrinsics = {}
-  images, alphas, w2cs, ks, names = [], [], [], [], []
-  size = None
+  intrinsics = {}  # (checked before an images_N/ folder is made for them)
   for name, image in entries:
     if image.camera_id not in intrinsics:
       intrinsics[image.camera_id] = _pinhole(recon.cameras[image.camera_id], sparse, name)
+  image_dir = root / "images"
+  if factor != 1:
+    image_dir = downscaled.image_folder(
+        root, factor, lambda: [(_image_file(root / "images", name), name) for name, _ in entries],
+        make=make_downscaled)
+  elif not image_dir.is_dir():
+    found = sorted(p.name for p in root.glob("images*") if p.is_dir())
+    raise FileNotFoundError(f"image folder for factor=1 not found: {image_dir} (image "
+                            f"folders in {root}: {', '.join(found) or 'none'}).")
+  images, alphas, w2cs, ks, names = [], [], [], [], []
+  size = None
+  for name, image in entries:
     (fx, fy, cx, cy), (cam_w, cam_h) = intrinsics[image.camera_id]
     file = _image_file(image_dir, name)
     color, alpha = _io.read_image(file)

@@ -380,9 +380,20 @@ def _colmap(spec: DataSpec):
   """A COLMAP capture (`load_colmap`): the held-out split, its sparse points and their box."""
   from mfsample.data.colmap import load_colmap
 
-  views, points = load_colmap(resolve_path(spec.path), factor=spec.downscale,
-                              background=spec.background)
+  views, points = _with_downscale(spec, lambda: load_colmap(
+      resolve_path(spec.path), factor=spec.downscale, background=spec.background))
   return _with_points(views, points, spec)
+
+
+def _with_downscale(spec: DataSpec, load):
+  """`load()`, an image folder that is missing and cannot be made named with its field."""
+  from mfsample.data.downscaled import MissingImageFolder
+
+  try:
+    return load()
+  except MissingImageFolder as e:
+    raise MissingImageFolder(f"{e} [config.data.downscale = {spec.downscale}: N reads "
+                             "images_N/, 1 images/]") from None
 
 
 def _nerfstudio(spec: DataSpec):
@@ -392,7 +403,8 @@ def _nerfstudio(spec: DataSpec):
   from mfsample.data.nerfstudio import applied_transform, load_nerfstudio
 
   path = resolve_path(spec.path)
-  views, points = load_nerfstudio(path, factor=spec.downscale, background=spec.background)
+  views, points = _with_downscale(spec, lambda: load_nerfstudio(
+      path, factor=spec.downscale, background=spec.background))
   meta = read_json(path if path.suffix == ".json" else path / "transforms.json")
   world = applied_transform(meta)[:3] if "applied_transform" in meta else None
   return _with_points(views, points, spec, world)
@@ -413,7 +425,8 @@ def _llff(spec: DataSpec):
   """A forward-facing LLFF capture (`load_llff`): the held-out split, the frusta's box."""
   from mfsample.data.llff import load_llff
 
-  views, depth_bounds = load_llff(resolve_path(spec.path), factor=spec.downscale)
+  views, depth_bounds = _with_downscale(spec, lambda: load_llff(resolve_path(spec.path),
+                                                                 factor=spec.downscale))
   return _split(views, spec, frustum_box(views.cameras, depth_bounds))
 
 

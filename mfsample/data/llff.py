@@ -12,13 +12,14 @@ So the camera looks along -column 2 ("back" points behind it). In OpenCV axes (x
 y down, z forward) the camera-to-world rotation is [col 1, col 0, -col 2]. Views are ordered
 like the sorted image file names, as in the LLFF tools. Coordinates are returned as stored:
 no recentring or rescaling (NeRF's `recenter_poses` / bound scaling are training choices).
+A missing `images_{factor}/` is made from `images/` when read (`mfsample.data.downscaled`).
 """
 
 import numpy as np
 
 from mfsample import fingerprints
 from mfsample.camera import Camera
-from mfsample.data import _io
+from mfsample.data import _io, downscaled
 from mfsample.data.views import Views
 
 # LLFF (down, right, back) columns -> OpenCV (right, down, forward) columns.
@@ -27,13 +28,16 @@ LLFF_TO_CV = np.array([[0.0, 1.0, 0.0],
                        [0.0, 0.0, -1.0]])
 
 
-def load_llff(path, *, factor=8):
+def load_llff(path, *, factor=8, make_downscaled=True):
   """Loads an LLFF forward-facing capture.
 
   Args:
     path: folder holding `poses_bounds.npy` and `images_{factor}/` (`images/` for factor 1).
-    factor: which pre-downsampled image folder to read. Intrinsics are scaled by the ratio of
+    factor: which downsampled image folder to read. Intrinsics are scaled by the ratio of
       the actual image size to the (h, w) stored in the poses, per axis.
+    make_downscaled: when `images_{factor}/` is missing, make it from `images/`
+      (`mfsample.data.downscaled`: Lanczos, written beside it once, with a log line);
+      False: refuse it.
 
   Returns:
     (views, bounds): `Views` (images [V, H, W, 3] float32, alphas None, cameras in OpenCV
@@ -74,11 +78,14 @@ def load_llff(path, *, factor=8):
     raise _io.DatasetError(f"{poses_path}: row {bad} has invalid bounds near={bounds[bad, 0]}, "
                            f"far={bounds[bad, 1]} (need 0 < near < far).")
 
-  image_dir = _io.require_dir(root / ("images" if factor == 1 else f"images_{factor}"),
-                              f"image folder for factor={factor}")
+  if factor == 1:
+    image_dir = _io.require_dir(root / "images", "image folder for factor=1")
+  else:
+    image_dir = downscaled.image_folder(
+        root, factor, lambda: [(f, f.name) for f in _image_files(root / "images")],
+        make=make_downscaled)
   fingerprints.note(image_dir)  # its listing pairs the images with the poses
-  files = sorted(p for p in image_dir.iterdir()
-                 if p.is_file() and p.suffix.lower() in _io.IMAGE_SUFFIXES)
+  files = _image_files(image_dir)
   if len(files) != len(mats):
     raise _io.DatasetError(f"{image_dir}: {len(files)} images but {poses_path} has "
                            f"{len(mats)} poses.")
@@ -112,6 +119,12 @@ def load_llff(path, *, factor=8):
   views = Views(images=np.stack(images).astype(np.float32), cameras=cameras,
                 names=tuple(f.stem for f in files))
   return views, bounds.astype(np.float32)
+
+
+def _image_files(folder):
+  """The image files of a folder, sorted by name (the order of the poses)."""
+  return sorted(p for p in folder.iterdir()
+                if p.is_file() and p.suffix.lower() in _io.IMAGE_SUFFIXES)
 
 
 def poses_bounds_from_cameras(cameras, bounds):

@@ -5,7 +5,8 @@ The layout (`ns-process-data images --data photos/ --output-dir scene/`):
   scene/
     transforms.json    cameras and frames (below)
     images/            the photographs (frame_00001.png ...)
-    images_2/ ...      optional downscaled copies with the same file names
+    images_2/ ...      downscaled copies with the same file names (a missing one is made
+                       from the frames' images when read: `mfsample.data.downscaled`)
     sparse_pc.ply      the SfM points (`ply_file_path`), in the frames' world
     colmap/            COLMAP's own model (read it with `load_colmap` if you prefer)
 
@@ -62,7 +63,7 @@ from pathlib import Path
 import numpy as np
 
 from mfsample.camera import Camera
-from mfsample.data import _io, transforms_json
+from mfsample.data import _io, downscaled, transforms_json
 from mfsample.data.colmap import PointCloud
 from mfsample.data.views import Views
 
@@ -84,12 +85,16 @@ NS_PROCESS_DATA_TRANSFORM = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]
                                       [0.0, -1.0, 0.0, 0.0]])
 
 
-def load_nerfstudio(path, *, factor=1, frame="transforms", background=(1.0, 1.0, 1.0)):
+def load_nerfstudio(path, *, factor=1, frame="transforms", background=(1.0, 1.0, 1.0),
+                    make_downscaled=True):
   """Loads a nerfstudio capture: posed images and the SfM points.
 
   Args:
     path: the scene folder holding `transforms.json`, or the json file itself.
     factor: read the downscaled `images_{factor}/` copies (1: the frames' own files).
+    make_downscaled: when `images_{factor}/` is missing, make it from the frames' own files
+      (`mfsample.data.downscaled`: Lanczos, written beside them once, with a log line);
+      False: refuse it.
     frame: "transforms" (the world of transform_matrix) or "original" (`applied_transform`
       undone; the module docstring says which is which).
     background: [3] colour that images with an alpha channel are composited on.
@@ -136,12 +141,19 @@ def load_nerfstudio(path, *, factor=1, frame="transforms", background=(1.0, 1.0,
   order.sort()
   frames = [meta["frames"][i] for _, i in order]
   names = _frame_names(root, [f["file_path"] for f in frames])
+  wheres = [f"{json_path}: frame {entry['file_path']!r}" for entry in frames]
+  # (every camera checked before an images_N/ folder is made for it)
+  pinholes = [_pinhole(meta, entry, where) for entry, where in zip(frames, wheres, strict=True)]
+  if factor > 1:
+    downscaled.image_folder(root, factor, lambda: [
+        (_frame_image(root, f["file_path"], 1), Path(f["file_path"]).name) for f in frames],
+        make=make_downscaled, source_folder=None)
   images, alphas, w2cs, ks = [], [], [], []
   size = None
   seen = {}  # image file or view name -> (index in the json, file_path) of its first frame
-  for (_, index), entry, name in zip(order, frames, names, strict=True):
-    where = f"{json_path}: frame {entry['file_path']!r}"
-    (fx, fy, cx, cy), (cam_w, cam_h) = _pinhole(meta, entry, where)
+  for (_, index), entry, name, where, pinhole in zip(order, frames, names, wheres, pinholes,
+                                                     strict=True):
+    (fx, fy, cx, cy), (cam_w, cam_h) = pinhole
     file = _frame_image(root, entry["file_path"], factor)
     for key, what in (((root / entry["file_path"]).resolve(), "the image"),
                       (file.resolve(), "the image"), (("name", name), "the view name")):

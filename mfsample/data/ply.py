@@ -13,9 +13,19 @@ blue). Normals are unused (written as zeros). These are exactly the raw groups o
 `mfsample.model` (`means`, `sh_dc`, `sh_rest`, `opacity_logits`, `log_scales`, `quats`), so
 a file becomes a model's mean without any conversion.
 
-Writing may append extra float properties per Gaussian (`extra`, e.g. the uncertainty of
-`mfsample.gaussian_uncertainty`: `u_share`, `position_std`, `colour_std`) after the standard
-ones; 3DGS tools and splat viewers skip properties they do not know, and so does `load_ply`.
+Files are written exactly as the reference code writes them: those 62 float32 properties in
+that order, SH of any degree padded to degree 3 with zeros (per channel: red's 15
+coefficients, then green's, then blue's), normals zero. Readers that take the header at its
+word (SuperSplat, plyfile, gsplat's tools) and those that do not (the reference SIBR viewer
+reads fixed records of 62 floats) see the same Gaussians. A header comment
+`sh_degree D` records the model's degree, so that `load_ply` returns a degree-1 model as
+degree 1 (the padding is dropped when it is all zero); readers ignore comments.
+
+`write_gaussians_ply(..., extra=...)` appends extra float properties per Gaussian (e.g. the
+uncertainty of `mfsample.gaussian_uncertainty`) after the 62: readers that go by property
+name skip them (so does `load_ply`), but a fixed-record reader misreads every Gaussian after
+the first. The next-views job writes its per-Gaussian uncertainty to a file of its own
+(`mfsample.your_data.uncertainty_ply`) instead.
 
 Reading accepts any SH degree 0-3 (told by the number of `f_rest_*` properties), properties
 in any order and of any float type, big- or little-endian data, and ignores properties it does
@@ -28,6 +38,7 @@ point cloud saved by mistake). `read_ply_data` is the reader every `.ply` goes t
 (point clouds too, where ASCII is allowed): a file is read in full or refused.
 """
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -45,6 +56,13 @@ _COLUMNS = {
 }
 # Number of f_rest properties -> SH degree: 3 channels x ((degree + 1)^2 - 1) coefficients.
 _REST_COUNT = {3 * ((d + 1) ** 2 - 1): d for d in range(4)}
+# The reference layout's SH degree: every file holds f_rest_0..44.
+FILE_SH_DEGREE = 3
+_FILE_REST = (FILE_SH_DEGREE + 1) ** 2 - 1  # coefficients per channel
+# Float properties per Gaussian of the reference layout: x y z, normals, 3 + 45 SH, opacity,
+# 3 scales, 4 quaternion entries.
+RECORD_FLOATS = 3 + 3 + 3 * (_FILE_REST + 1) + 1 + 3 + 4
+_DEGREE_COMMENT = re.compile(r"^sh_degree ([0-3])\b")
 
 
 def _plyfile():
@@ -60,7 +78,8 @@ def _plyfile():
 
 
 def ply_arrays(mean, mask=None, extra=None):
-  """{property name: [N] float32} of the live rows of raw parameters `mean`, in file order.
+  """{property name: [N] float32} of the live rows of raw parameters `mean`, in file order:
+  the reference layout's 62 properties (SH padded to degree 3 with zeros), then `extra`.
 
   Args:
     mean: {group: [C, ...]} raw parameters (`Model.params.mean`).
@@ -78,10 +97,12 @@ def ply_arrays(mean, mask=None, extra=None):
     out[axis] = np.zeros(n, np.float32)
   for c in range(3):
     out[f"f_dc_{c}"] = mean["sh_dc"][live, c]
-  if "sh_rest" in mean:  # [N, K - 1, 3] -> channel-major [N, 3 (K - 1)]
-    rest = np.transpose(mean["sh_rest"][live], (0, 2, 1)).reshape(n, -1)
-    for j in range(rest.shape[1]):
-      out[f"f_rest_{j}"] = rest[:, j]
+  rest = np.zeros((n, 3, _FILE_REST), np.float32)  # channel-major, padded per channel
+  if "sh_rest" in mean:  # [N, K - 1, 3]
+    rest[:, :, :mean["sh_rest"].shape[1]] = np.transpose(mean["sh_rest"][live], (0, 2, 1))
+  rest = rest.reshape(n, -1)
+  for j in range(rest.shape[1]):
+    out[f"f_rest_{j}"] = rest[:, j]
   out["opacity"] = mean["opacity_logits"][live]
   for i in range(3):
     out[f"scale_{i}"] = mean["log_scales"][live, i]
@@ -101,9 +122,9 @@ def ply_arrays(mean, mask=None, extra=None):
   return out
 
 
-def write_ply(path, arrays):
+def write_ply(path, arrays, comments=()):
   """Writes {name: [N] array} as the float32 properties of a binary little-endian `vertex`
-  element (in the dict's order); the file is replaced atomically."""
+  element (in the dict's order), with header `comments`; the file is replaced atomically."""
   plyfile = _plyfile()
   names = list(arrays)
   n = len(arrays[names[0]])
@@ -112,15 +133,31 @@ def write_ply(path, arrays):
     table[name] = arrays[name]
   path = Path(path)
   with atomic_path(path) as tmp:
-    plyfile.PlyData([plyfile.PlyElement.describe(table, "vertex")],
-                    byte_order="<").write(str(tmp))
+    plyfile.PlyData([plyfile.PlyElement.describe(table, "vertex")], byte_order="<",
+                    comments=list(comments)).write(str(tmp))
   return path
 
 
+def write_gaussians_ply(path, mean, mask=None, extra=None):
+  """Writes raw parameters `mean` ({group: [C, ...]}, rows where `mask` is True) as a 3DGS
+  file in the reference layout (`ply_arrays`), its SH degree in a header comment.
+
+  Args:
+    path: the file (replaced atomically).
+    mean: raw parameters (`Model.params.mean`, `load_ply`'s output).
+    mask: optional [C] bool of the rows to write.
+    extra: optional {name: [C]} float properties after the 62 (see the module docstring:
+      fixed-record readers then misread the file).
+  """
+  comment = (f"sh_degree {sh_degree_of(mean)}: f_rest beyond it are zeros "
+             f"(the {RECORD_FLOATS}-float 3DGS layout)")
+  return write_ply(path, ply_arrays(mean, mask, extra), comments=(comment,))
+
+
 def export_ply(path, model, extra=None):
-  """Writes the mean of `model` (live Gaussians only) to `path` in the 3DGS layout, with the
-  `extra` float properties ({name: [C]}) after the standard ones."""
-  return write_ply(path, ply_arrays(model.params.mean, model.mask, extra))
+  """Writes the mean of `model` (live Gaussians only) to `path` in the 3DGS reference layout
+  (`write_gaussians_ply`; `extra` float properties {name: [C]} after the standard ones)."""
+  return write_gaussians_ply(path, model.params.mean, model.mask, extra)
 
 
 def raw_from_gaussians(gaussians):
@@ -144,8 +181,9 @@ def raw_from_gaussians(gaussians):
 
 
 def export_gaussians(path, gaussians):
-  """Writes activated `Gaussians` (e.g. `mfsample.testing.random_gaussians`) as a 3DGS file."""
-  return write_ply(path, ply_arrays(raw_from_gaussians(gaussians)))
+  """Writes activated `Gaussians` (e.g. `mfsample.testing.random_gaussians`) as a 3DGS file
+  in the reference layout."""
+  return write_gaussians_ply(path, raw_from_gaussians(gaussians))
 
 
 # ------------------------------------------------------------------------- reading
@@ -193,7 +231,14 @@ def read_ply_data(path, *, allow_ascii=False, what=".ply file"):
 
 
 def read_vertex_table(path):
-  """The `vertex` element of a binary PLY file as a numpy structured array.
+  """The `vertex` element of a binary PLY file as a numpy structured array (one field per
+  property); the errors of `read_vertex_and_comments`."""
+  return read_vertex_and_comments(path)[0]
+
+
+def read_vertex_and_comments(path):
+  """(the `vertex` element of a binary PLY file as a numpy structured array, [the header's
+  comments]).
 
   Raises:
     FileNotFoundError: no file at `path`.
@@ -211,7 +256,7 @@ def read_vertex_table(path):
   if lists:
     raise DatasetError(f"{path}: vertex property {lists[0]!r} is a list; a 3DGS file has "
                        "scalar properties only.")
-  return vertex.data
+  return vertex.data, list(data.comments)
 
 
 _ASCII_MESSAGE = ("{path}: ASCII PLY; 3DGS models are binary little-endian files. Convert it "
@@ -324,14 +369,16 @@ def load_ply(path):
     {group: float32 numpy array}: `means` [N, 3], `log_scales` [N, 3], `quats` [N, 4],
     `opacity_logits` [N], `sh_dc` [N, 3] and, for SH degree > 0, `sh_rest` [N, K - 1, 3]
     (K = (degree + 1)^2), exactly as stored (the model's raw groups: `init_model`'s mean,
-    `mfsample.model.model_from_mean`).
+    `mfsample.model.model_from_mean`). The degree is told by the number of `f_rest_*`
+    properties, or by the `sh_degree D` comment that mfsample's writer leaves when the
+    bands above D are all zero.
 
   Raises:
     FileNotFoundError: no file at `path`.
     DatasetError: the problems listed in the module docstring, naming the file and the
       property.
   """
-  table = read_vertex_table(path)
+  table, comments = read_vertex_and_comments(path)
   present = set(table.dtype.names)
   for group, columns in _COLUMNS.items():
     missing = [c for c in columns if c not in present]
@@ -355,8 +402,14 @@ def load_ply(path):
       raise DatasetError(f"{path}: missing vertex property {missing[0]} (f_rest_* must be "
                          f"numbered 0..{len(rest) - 1}).")
     values = _stack(table, expected, path)  # channel-major: [N, 3, K - 1]
-    out["sh_rest"] = np.ascontiguousarray(
-        np.transpose(values.reshape(n, 3, len(rest) // 3), (0, 2, 1)))
+    rest = np.transpose(values.reshape(n, 3, len(rest) // 3), (0, 2, 1))
+    written = next((int(m.group(1)) for m in map(_DEGREE_COMMENT.match, comments) if m), None)
+    if written is not None and written < _REST_COUNT[3 * rest.shape[1]]:
+      kept = (written + 1) ** 2 - 1  # the padding of a lower-degree model, when all zero
+      if not np.any(rest[:, kept:]):
+        rest = rest[:, :kept]
+    if rest.shape[1]:
+      out["sh_rest"] = np.ascontiguousarray(rest)
   return out
 
 

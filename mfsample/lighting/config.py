@@ -224,13 +224,11 @@ def tiny(config):
   """24 x 24 images of a synthetic diffuse shell (no Mitsuba), n = 4, 3 lights, few steps."""
   config.num_lights = 3
   config.steps_per_light = 30
-  config.progress = False
   config.data.kind = "synthetic"
   config.data.width = 24
   config.data.height = 24
   config.data.num_train = 4
   config.data.num_test = 2
-  config.data.progress = False
   config.model.out_coeffs = 1
   config.model.light_coeffs = 4
   config.model.init_points = 150

@@ -255,6 +255,7 @@ def run_light_planning(config, workdir):
   load_start = list(os.getloadavg())
   with jobs.open_workdir(JOB, config, workdir) as wd:
     t0, cpu0 = time.perf_counter(), time.process_time()
+    wd.stage(f"capturing the views under the basis lights ({config.data.kind} data)")
     data = load_light_data(data_spec(config.data), int(config.model.light_coeffs))
     capture_seconds, capture_cpu = time.perf_counter() - t0, time.process_time() - cpu0
     wd.write_config()
@@ -310,6 +311,7 @@ def run_light_planning(config, workdir):
     }
     if config.figures.enabled and wd.writes:
       from mfsample.lighting import figures
+      wd.stage("figures")
       figures.write_figures(config, wd.path, results, ctx, predictions)
     results["seconds_this_call"] = time.perf_counter() - t_start
     # CPU time of every thread of this process: on an otherwise idle machine the wall-clock

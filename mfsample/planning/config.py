@@ -345,7 +345,6 @@ def tiny(config):
   """24 x 24 images of random ground-truth Gaussians, 8 candidates, 3 views, a few steps."""
   config.eval_views = (2, 3)
   config.max_views = 3
-  config.progress = False
   config.data.kind = "synthetic"
   config.data.width = 24
   config.data.height = 24

@@ -396,6 +396,7 @@ def run_camera_planning(config, workdir):
   """
   t_start = time.perf_counter()
   with jobs.open_workdir(JOB, config, workdir) as wd:
+    wd.stage(f"loading the candidate pool ({config.data.kind} data)")
     pool = make_pool(data_spec(config.data))
     if int(config.max_views) > len(pool.candidates):
       raise ValueError(f"config.max_views = {config.max_views}: the pool has only "
@@ -421,6 +422,8 @@ def run_camera_planning(config, workdir):
     trainer = Trainer(config, pool)
     budgets = Budgets()
     records = []
+    wd.stage(f"{len(todo)} run(s) of {rounds} round(s) each, then the final models at "
+             f"{', '.join(map(str, eval_views))} views (the first round compiles)")
     bar = wd.progress(len(todo) * (rounds + len(eval_views)))
     for seed, name in todo:
       entry = f"runs/{run_name(name, seed)}.json"
@@ -468,6 +471,7 @@ def run_camera_planning(config, workdir):
     wd.write_text("table.md", tables.report_markdown(summary, paired, optimisation,
                                                      run_seconds, labels, eval_views, title))
     if config.figures.enabled:
+      wd.stage("figures: cameras.png, and U over the sphere of cameras (landscape.png)")
       if wd.writes:
         figures.camera_figure(records, pool, wd.file("cameras.png"), seed=int(config.seeds[0]))
       land, budgets = landscape(config, pool, trainer, budgets)  # (every process computes)

@@ -259,7 +259,6 @@ def tiny(config):
   The models train with the round config of `configs/camera_planning.py:tiny` (100 steps,
   3 views), so tests share one compilation of the training step with the planning tests.
   """
-  config.progress = False
   planning = config.candidates.planning
   planning_variants.tiny(planning)
   config.ause.scenes = ("synthetic",)

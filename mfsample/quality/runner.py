@@ -41,6 +41,7 @@ def run_uncertainty_quality(config, workdir):
           f"{len(out['views'][scenes[0]][1])} test views per scene, mean over both"))
       figure_paths = {}
       if config.figures.enabled and wd.writes:
+        wd.stage("figures of the AUSE benchmark")
         for scene in scenes:
           figure_paths[scene] = figures.scene_figure(
               scene, out["views"][scene][1], out["records"], out["arrays"],

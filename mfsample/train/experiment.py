@@ -34,6 +34,7 @@ def train_and_evaluate(config, workdir):
   from mfsample.train import evaluate as eval_lib
 
   with jobs.open_workdir(JOB, config, workdir) as wd:
+    wd.stage(f"loading the data ({config.data.kind})")
     dataset = data_lib.load_dataset(config_blocks.data_spec(config.data))
     # Made before training: a network that cannot be loaded stops the run before it trains.
     lpips_fn = metrics.make_lpips(config.eval.lpips_net) if config.eval.lpips_net else None
@@ -60,6 +61,7 @@ def train_and_evaluate(config, workdir):
       z = sample_z(model, int(config.eval.uncertainty_samples),
                    seed=int(config.sampler.z_seed) + 1)
     t0 = time.perf_counter()
+    wd.stage(f"evaluating the {len(dataset.test)} test views")
     ev = eval_lib.evaluate(model, dataset.test, background=dataset.background,
                            settings=setup.step_config.settings, lpips_fn=lpips_fn,
                            uncertainty_z=z)

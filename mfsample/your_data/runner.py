@@ -8,7 +8,9 @@
 2. trains a stochastic field on them (`mfsample.train.run_training`), or, with `posthoc.ply`, fits
    B_hat to that model's frozen Gaussians (`mfsample.train.posthoc.fit_b_hat`); both
    checkpoint into `workdir/checkpoints` and a killed call resumes from there;
-3. renders every test view with its per-pixel U map (Eq. 10);
+3. renders every test view with its per-pixel U map (Eq. 10); a post-hoc model whose mean
+   renders them below `posthoc.min_psnr` does not reproduce the capture: a warning, and
+   `warnings` in the results, say so;
 4. scores the candidates (the unused views, or poses on a sphere) by U and proposes the top
    k; with candidate images, Spearman's rho of U against the model's error there
    (`mfsample.planning.u_error`) says how far to trust the ranking on this capture;
@@ -29,6 +31,7 @@ point to are what it wrote (otherwise they are computed again, from the checkpoi
 
 import os
 import time
+import warnings
 
 import jax.numpy as jnp
 import numpy as np
@@ -56,6 +59,7 @@ def run_next_views(config, workdir):
     if finished is not None:
       return finished
     t0 = time.perf_counter()
+    wd.stage(f"loading the data ({config.data.kind})")
     spec = data_spec(config.data)
     dataset = datasets.load_dataset(spec)
     # What depends on the data alone is checked before anything is written or trained.
@@ -85,11 +89,13 @@ def run_next_views(config, workdir):
     z = sample_z(model, int(config.next_views.samples), seed=int(config.next_views.z_seed))
     budgets = Budgets().replace(eval=settings, score=settings, mean=settings)
     test = _test_maps(config, model, dataset, z, settings, lpips_fn, wd)
+    warnings_ = _posthoc_warnings(config, kind, test["metrics"])
     proposal = _propose(config, model, dataset, train_idx, candidates, center, z, budgets, wd)
     wd.write_json("next_views.json", proposal["record"], indent=2)
     # Files only: the other processes of a multi-process run have nothing to compute here.
     files = {}
     if wd.writes:
+      wd.stage("writing the proposals and the uncertainty per Gaussian for viewers")
       files, budgets = _viewer_files(config, model, dataset, proposal, z, budgets, wd)
     if config.next_views.figure and wd.writes:
       from mfsample.your_data.figure import next_views_figure
@@ -120,6 +126,7 @@ def run_next_views(config, workdir):
         "top_k": [{"rank": t["rank"], "name": t["name"], "u": t["u"]}
                   for t in record["top_k"]],
         "files": files,
+        "warnings": warnings_,
         "seconds_this_call": time.perf_counter() - t0,
     }
     # Read back only while what it points to is what this call wrote.
@@ -127,6 +134,21 @@ def run_next_views(config, workdir):
         "train_log.json", "point_cloud.ply", "test", "next_views.json", "next_views",
         "uncertainty_ply", "next_views.png"))
     return results
+
+
+def _posthoc_warnings(config, kind, metrics):
+  """[message] when a post-hoc model does not reproduce its capture (test PSNR below
+  `posthoc.min_psnr`), each also issued as a warning."""
+  if kind != "posthoc" or not metrics["psnr"] < float(config.posthoc.min_psnr):
+    return []
+  message = (f"the model of posthoc.ply = {config.posthoc.ply!r} renders the test views at "
+             f"{metrics['psnr']:.1f} dB PSNR, below posthoc.min_psnr = "
+             f"{float(config.posthoc.min_psnr):g}: it does not reproduce this capture (a "
+             "model of another capture or world, or data.background = "
+             f"{tuple(config.data.background)} is not the one it was trained on), and its "
+             "U says little about it")
+  warnings.warn(message, stacklevel=3)
+  return [message]
 
 
 def _count(n, noun):
@@ -293,6 +315,7 @@ def report(results, workdir):
   ranking follows the model's error on this capture."""
   lines = [f"{results['kind']} uncertainty of {results['scene']}: test PSNR "
            f"{results['test']['psnr']:.2f} dB, mean U {results['test']['mean_u']:.4g}"]
+  lines += [f"  warning: {w}" for w in results.get("warnings", ())]
   lines += [f"  next view {t['rank']}: {t['name']} (U = {t['u']:.4g})" for t in results["top_k"]]
   nv = results["next_views"]
   if nv["candidates"] == "unused":  # candidates with images: U against the model's error

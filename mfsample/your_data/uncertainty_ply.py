@@ -1,33 +1,45 @@
-"""Uncertainty a splat viewer shows: the model as 3DGS .ply files that carry it per Gaussian.
+"""Uncertainty a splat viewer shows: the model as 3DGS .ply files, and its uncertainty per
+Gaussian beside them.
 
-`write_uncertainty_plys(directory, model, per_gaussian)` writes two files in the standard
-3DGS layout (`mfsample.data.ply`), geometry (centres, scales, rotations, opacities) exactly
-the model's, with three extra float properties per Gaussian
-(`mfsample.gaussian_uncertainty.GaussianUncertainty`):
+`write_uncertainty_plys(directory, model, per_gaussian)` writes three files, rows in the same
+order (the model's live Gaussians):
 
-  u_share        the Gaussian's share of U over the views (blending weight x pixel variance)
-  position_std   the standard deviation of its centre over theta(z), world units
-  colour_std     the standard deviation of its base colour over theta(z)
+* `coloured_by_uncertainty.ply`: the model in the reference 3DGS layout
+  (`mfsample.data.ply`: 62 floats per Gaussian, SH padded to degree 3), geometry (centres,
+  scales, rotations, opacities) exactly the model's, every colour replaced by a colour map of
+  its share of U (magma: black = no share, through purple and orange to pale yellow = the
+  largest; the scale's top is the 99th percentile of the shares, so one outlier does not
+  darken the rest), view-dependent colour removed. Any splat viewer opens it (SuperSplat,
+  gsplat's, the reference SIBR viewer): bright is where the model is unsure.
+* `model_colours.ply`: the model as it is, in the same layout.
+* `per_gaussian.ply`: a point cloud of the centres (x, y, z) with three float properties
+  (`mfsample.gaussian_uncertainty.GaussianUncertainty`), for scripts (`plyfile`) and point
+  cloud tools that colour by a property (CloudCompare):
 
-* `coloured_by_uncertainty.ply`: every Gaussian's colour replaced by a colour map of its
-  share (magma: black = no share of U, through purple and orange to pale yellow = the largest;
-  the scale's top is the 99th percentile of the shares, so one outlier does not darken the
-  rest), view-dependent colour removed. Open it in SuperSplat or any splat viewer: bright is
-  where the model is unsure.
-* `model_colours.ply`: the model's own colours, the same properties: a viewer that can colour
-  by a property (or a script) reads them there.
+    u_share        the Gaussian's share of U over the views (blending weight x pixel variance)
+    position_std   the standard deviation of its centre over theta(z), world units
+    colour_std     the standard deviation of its base colour over theta(z)
+
+  They are not appended to the splat files: a viewer reading fixed 62-float records (SIBR)
+  would misread every Gaussian after the first.
+
+`experiments/render_ply.py` renders any of the splat files, or `model_colours.ply` coloured
+by a property of `per_gaussian.ply`, to PNG.
 """
 
 import os
 
 import numpy as np
 
-from mfsample.data.ply import ply_arrays, write_ply
+from mfsample.data.ply import write_gaussians_ply, write_ply
 from mfsample.renderer.sh import rgb_to_sh_dc
 from mfsample.your_data.export import colour_mapped
 
 COLOURED = "coloured_by_uncertainty.ply"
 OWN_COLOURS = "model_colours.ply"
+PER_GAUSSIAN = "per_gaussian.ply"
+# The properties of PER_GAUSSIAN: {name: field of GaussianUncertainty}.
+PROPERTIES = {"u_share": "share", "position_std": "position_std", "colour_std": "colour_std"}
 
 
 def share_colours(share, live, percentile=99.0):
@@ -40,7 +52,7 @@ def share_colours(share, live, percentile=99.0):
 
 
 def write_uncertainty_plys(directory, model, per_gaussian):
-  """Writes the two files of the module docstring to `directory`.
+  """Writes the three files of the module docstring to `directory`.
 
   Args:
     directory: output folder (created if needed).
@@ -48,16 +60,22 @@ def write_uncertainty_plys(directory, model, per_gaussian):
     per_gaussian: its `GaussianUncertainty` ([C] arrays).
 
   Returns:
-    (path of coloured_by_uncertainty.ply, path of model_colours.ply).
+    (path of coloured_by_uncertainty.ply, of model_colours.ply, of per_gaussian.ply).
   """
   os.makedirs(directory, exist_ok=True)
-  extra = {"u_share": per_gaussian.share, "position_std": per_gaussian.position_std,
-           "colour_std": per_gaussian.colour_std}
+  live = np.asarray(model.mask, bool)
   mean = {g: np.asarray(v, np.float32) for g, v in model.params.mean.items()}
-  own = write_ply(os.path.join(directory, OWN_COLOURS), ply_arrays(mean, model.mask, extra))
-  colours = share_colours(per_gaussian.share, model.mask)
+  own = write_gaussians_ply(os.path.join(directory, OWN_COLOURS), mean, live)
+  colours = share_colours(per_gaussian.share, live)
   coloured = dict(mean, sh_dc=np.asarray(rgb_to_sh_dc(colours), np.float32))
-  if "sh_rest" in coloured:
-    coloured["sh_rest"] = np.zeros_like(coloured["sh_rest"])
-  path = write_ply(os.path.join(directory, COLOURED), ply_arrays(coloured, model.mask, extra))
-  return path, own
+  coloured.pop("sh_rest", None)  # (written as zeros: no view-dependent colour)
+  path = write_gaussians_ply(os.path.join(directory, COLOURED), coloured, live)
+  points = {axis: mean["means"][live, i] for i, axis in enumerate("xyz")}
+  for name, field in PROPERTIES.items():
+    values = np.asarray(getattr(per_gaussian, field), np.float32)[live]
+    if not np.all(np.isfinite(values)):
+      raise ValueError(f"per_gaussian.{field} has non-finite values")
+    points[name] = values
+  extras = write_ply(os.path.join(directory, PER_GAUSSIAN), points,
+                     comments=(f"per Gaussian of {OWN_COLOURS} and {COLOURED}, same rows",))
+  return path, own, extras
