@@ -24,7 +24,7 @@ first (`mfsample.roll_call`): two processes with one id, or with different count
 process at once with one line naming the variable.
 
 What happens when a process fails (JAX's coordination service, measured in
-tests/test_distributed.py): a process that is not connected within the init timeout stops
+tests/core/test_distributed.py): a process that is not connected within the init timeout stops
 every process with an error naming the missing one; a process that dies while the others
 run makes the next collective fail at once (its connections close), and the service stops
 the survivors after at most the heartbeat timeout. No process waits forever.

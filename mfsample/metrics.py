@@ -289,7 +289,7 @@ def ause(uncertainty, error, mask=None, *, measure="mae", normalize="max"):
   The common maximum grows with the curve being scored: a ranking that keeps the largest
   errors for last ends on a high curve and is divided by that end value. So under "max" a
   reversed ranking (the worst order) need not score worse than a random one; for uniform
-  errors the two are level (`tests/test_metrics.py`). `normalize="start"` divides both curves
+  errors the two are level (`tests/core/test_metrics.py`). `normalize="start"` divides both curves
   by the whole image's error instead (their common value at r = 0; Ilg et al. 2018): AUSE then
   grows with every swap towards the reversed ranking, which scores the largest value. Compare
   AUSE on the same error maps, and beside that of a constant map.

@@ -1,5 +1,5 @@
 """Tiny workdirs of the jobs the viewer shows, written as the jobs write them, and a browser
-tab stand-in: no training, no data, no Chromium (tests/test_viewer*.py)."""
+tab stand-in: no training, no data, no Chromium (tests/viewer/test_viewer*.py)."""
 
 import json
 import os

@@ -51,7 +51,7 @@ def _training(steps, kind):
   # normalisation: every B_hat entry then grows at the same rate, seen or not (measured),
   # and U only measures how much of the scene a view sees. At 1e-4 the data gradients of
   # observed Gaussians dominate their Adam denominators and slow their growth: U is low
-  # near the training views and high away from them (tests/test_uncertainty.py).
+  # near the training views and high away from them (tests/core/test_uncertainty.py).
   t.loss.volume_weight = 1e-4
   t.loss.volume_stop_before_end = 10  # Authors: the last 100 of 2000 steps; scaled.
   t.render.max_intersections = 1 << 14  # Initial budget (grown on overflow).

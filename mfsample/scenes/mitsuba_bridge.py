@@ -7,7 +7,7 @@ without it. Conventions bridged here:
   *left*; OpenCV looks down +z with y down and x right. So sensor-to-world =
   camera-to-world (OpenCV) @ diag(-1, -1, 1). `fov_axis='x'` gives fx; the principal point
   is `principal_point_offset_{x,y}` in units of the film width / height, positive towards
-  smaller pixel coordinates: cx = W / 2 - offset_x W (measured: tests/test_scenes.py).
+  smaller pixel coordinates: cx = W / 2 - offset_x W (measured: tests/scenes/test_scenes.py).
   Mitsuba's film pixel (i, j) covers [j, j + 1) x [i, i + 1) like ours; a box
   reconstruction filter keeps each sample inside its pixel, so alpha is exact coverage.
 * Depth: the `aov` integrator's `position` output is the coverage-weighted mean of the hit
@@ -16,7 +16,7 @@ without it. Conventions bridged here:
 * Environment maps (`envmap`): a local direction (x, y, z) has u = atan2(x, -z) / 2 pi and
   v = acos(y) / pi; texel column c sits at u = (c + 1/2) / W and row r at v = r / (H - 1)
   (rows include both poles); radiance is bilinear between texels (checked against
-  `Emitter.eval` in tests/test_scenes.py). We rotate local +y to world +z (`ENV_TO_WORLD`)
+  `Emitter.eval` in tests/scenes/test_scenes.py). We rotate local +y to world +z (`ENV_TO_WORLD`)
   and fill texels with our function of the *world* direction. Mitsuba 3.9 stores the texels
   with one wrap-around column on each side; `set_environment` writes that layout.
 """
