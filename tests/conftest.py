@@ -2,7 +2,7 @@
 
 The suite is dominated by XLA compilation of many small, distinct programs, not by running
 them. LLVM's backend optimisation level 0 cuts that CPU time by about a third (measured on
-tests/test_render.py) without changing results: floating-point semantics are set by XLA's
+tests/renderer/test_render.py) without changing results: floating-point semantics are set by XLA's
 own flags, not by the LLVM pass pipeline. A user-provided XLA_FLAGS is respected.
 
 The test workers and the subprocesses tests start compile many of the same programs (the
