@@ -551,7 +551,11 @@ def scene_extent(cameras: Camera):
     ValueError: the camera centres all lie at the origin (no spread, no distance): the
       extent must then be given.
   """
-  centers = np.asarray(cameras.center, np.float64).reshape(-1, 3)
+  # In float64 from the stored poses, not from `Camera.center` (float32, computed by XLA):
+  # the extent goes into the sampler's spec that checkpoints record, so it must come out
+  # bit for bit the same in every process, on every device and with any XLA settings.
+  w2c = np.asarray(cameras.world_to_camera, np.float64).reshape(-1, 4, 4)
+  centers = -np.einsum("vji,vj->vi", w2c[:, :3, :3], w2c[:, :3, 3])
   mean = centers.mean(0)
   radius = float(np.max(np.linalg.norm(centers - mean, axis=-1)))
   distance = float(np.linalg.norm(mean))

@@ -26,6 +26,7 @@ A custom loop (`docs/api.md`) uses the same pieces:
 
 import dataclasses
 import json
+import math
 import time
 import warnings
 from collections.abc import Callable
@@ -323,13 +324,26 @@ def restore_latest(directory, setup: TrainSetup, initial_state: Callable, check=
   return state, setup.with_settings(settings), meta
 
 
+def _same_record(a, b, rel=1e-6):
+  """Equal JSON records, floats to `rel` (a bound derived from the scene's extent is a few
+  float32 roundings apart when another version or XLA setting computed it)."""
+  if isinstance(a, float) or isinstance(b, float):
+    return (isinstance(a, (int, float)) and isinstance(b, (int, float))
+            and math.isclose(a, b, rel_tol=rel, abs_tol=0.0))
+  if isinstance(a, dict) and isinstance(b, dict):
+    return a.keys() == b.keys() and all(_same_record(a[k], b[k], rel) for k in a)
+  if isinstance(a, (list, tuple)) and isinstance(b, (list, tuple)):
+    return len(a) == len(b) and all(_same_record(x, y, rel) for x, y in zip(a, b, strict=True))
+  return a == b
+
+
 def _check_same_run(setup: TrainSetup, spec, meta, path):
   """Refuses a checkpoint written with another seed, sampler or (where recorded) settings."""
   if meta.get("seed") != setup.seed:
     raise workdir_lib.WorkdirError(
         f"{path} was written by a run with seed {meta.get('seed')}, this run has seed "
         f"{setup.seed}: use another checkpoint directory")
-  if "sampler" in meta and meta["sampler"] != spec.to_dict():
+  if "sampler" in meta and not _same_record(meta["sampler"], spec.to_dict()):
     raise workdir_lib.WorkdirError(
         f"{path} was written by a run with another sampler ({meta['sampler']}, this run: "
         f"{spec.to_dict()}): use another checkpoint directory")

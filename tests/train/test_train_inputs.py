@@ -329,3 +329,36 @@ def test_training_killed_between_its_result_files_resumes(tiny_dataset, straight
     train_and_evaluate(config, workdir)
   assert open(metrics_path).read() == metrics  # the previous file, whole
   assert not [n for n in os.listdir(workdir) if ".tmp" in n]
+
+
+def test_a_checkpoint_of_the_same_sampler_resumes_whatever_rounding_its_extent_had():
+  """The means' bound comes from the scene extent: a checkpoint whose record gives it a few
+  float32 roundings apart (another process, version or XLA setting) is the same run; a
+  bound or a kind that differs is another run."""
+  from mfsample.train.loop import _same_record
+
+  spec = {"kind": "lowrank", "rank": 2, "bounds": [["means", 3.365836125401988],
+                                                   ["sh_dc", 0.5]], "z": "sobol"}
+  rounded = {**spec, "bounds": [["means", 3.365836187111537], ["sh_dc", 0.5]]}
+  assert _same_record(rounded, spec)
+  assert not _same_record({**spec, "bounds": [["means", 3.4], ["sh_dc", 0.5]]}, spec)
+  assert not _same_record({**spec, "rank": 3}, spec)
+  assert not _same_record({**spec, "z": "uniform"}, spec)
+  assert not _same_record({**spec, "bounds": [["means", 3.365836125401988]]}, spec)
+
+
+def test_the_scene_extent_is_computed_from_the_stored_poses_in_float64(monkeypatch):
+  """Not from `Camera.center` (float32, by XLA, rounded differently per device and XLA
+  setting): every process of a run gets the same extent, bit for bit."""
+  from mfsample import orbit_camera
+  from mfsample.camera import Camera
+  from mfsample.data.datasets import scene_extent
+
+  cams = [orbit_camera(a, 0.3, width=8, height=8, distance=3.0) for a in (0.0, 1.0, 2.0)]
+  batch = jax.tree.map(lambda *x: np.stack(x), *cams)
+  w2c = np.asarray(batch.world_to_camera, np.float64)
+  centres = -np.einsum("vji,vj->vi", w2c[:, :3, :3], w2c[:, :3, 3])
+  want = 1.1 * np.max(np.linalg.norm(centres - centres.mean(0), axis=-1))
+  assert want > 0
+  monkeypatch.setattr(Camera, "center", property(lambda self: 1 / 0))
+  assert scene_extent(batch) == want
