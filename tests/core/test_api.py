@@ -51,7 +51,8 @@ def test_every_exported_function_is_typed_documented_and_on_the_api_page():
 def test_the_api_page_is_a_program_without_configs_or_files(tmp_path):
   """docs/api.md's code, run as one program in a fresh process: it trains a field, computes
   U, picks the next 2 of 16 views, optimises a view and picks a light, importing no
-  ml_collections and writing no file."""
+  ml_collections and writing no file. (The page's run as a docs snippet: the other pages'
+  run in tests/docs/test_readme.py.)"""
   import re
   import subprocess
   import sys

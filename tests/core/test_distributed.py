@@ -35,18 +35,20 @@ OVERRIDES = {"train.batch_size": 4, "train.num_steps": 6, "train.checkpoint_ever
              "densify.every": 3, "densify.stop": 5, "eval.save_images": 1,
              "eval.uncertainty_samples": 0}
 
-# A run split over four devices against the same run on one: every float leaf of the state
-# within NORMWISE of its largest magnitude, max |a - b| <= NORMWISE * max |b| (integer leaves,
-# counts included, equal). Why: the four views' gradients and NDC gradient norms are float32
-# sums in another order (the devices' partial sums added by psum), a few roundings apart
-# (~1e-7 relative). Adam divides the first moment by the root of the second, so a gradient
-# component that is small against the roundings of the others is updated in a direction
-# those roundings decide: its parameter then differs by up to a learning rate. Measured
-# after 6 steps: at most 8e-5 of a leaf's magnitude (B_hat of the rotations; 7e-5 for the
-# screen radii, which follow the centres). 1e-3 leaves a 12x margin, while a view missing
-# from a step, or counted twice, changes Adam's first moment (linear in the gradients) by
-# about a quarter of its magnitude.
+# A run split over four devices against the same run on one: integer leaves (counts
+# included) equal; for every float leaf, nine components in ten within NORMWISE of the leaf's
+# largest magnitude and every one within ADAM_OUTLIERS of it. Why: the four views' gradients
+# and NDC gradient norms are float32 sums in another order (the devices' partial sums added
+# by psum), a few roundings apart (~1e-7 relative). Adam divides the first moment by the
+# root of the second, so a gradient component that is small against the roundings of the
+# others is updated in a direction those roundings decide: its parameter then differs by up
+# to a learning rate a step. Measured after 6 steps: the 90th percentile of every leaf below
+# 1e-4 of its magnitude, the largest component up to 3e-2 (which components, and by how
+# much, changes from run to run: the order of the devices' partial sums is not fixed). A
+# view missing from a step, or counted twice, changes Adam's first moment (linear in the
+# gradients) by about a quarter of its magnitude in most of its components.
 NORMWISE = 1e-3
+ADAM_OUTLIERS = 0.1
 
 
 def _config(**extra):
@@ -114,7 +116,9 @@ def _assert_states_close(a, b):
     x, y = np.asarray(x), np.asarray(y)
     assert x.shape == y.shape and x.dtype == y.dtype, i
     if np.issubdtype(x.dtype, np.floating) and x.size:
-      assert np.max(np.abs(x - y)) <= NORMWISE * np.max(np.abs(y)), i
+      diff, scale = np.abs(x - y), np.max(np.abs(y))
+      assert np.quantile(diff, 0.9) <= NORMWISE * scale, i
+      assert np.max(diff) <= ADAM_OUTLIERS * scale, i
     else:
       np.testing.assert_array_equal(x, y, err_msg=str(i))
 

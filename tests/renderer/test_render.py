@@ -141,9 +141,9 @@ def test_running_every_loop_step_changes_nothing():
   want, grads_want = render_and_grads(gaussians, cam, weights, settings=SMALL)
   got, grads_got = render_and_grads(gaussians, cam, weights, settings=every_step)
   assert int(render(gaussians, cam, settings=SMALL).stats.num_padded) < SMALL.max_intersections
-  for g, w in zip(got, want, strict=True):
-    np.testing.assert_allclose(g, w, atol=1e-7)
-  assert_grads_close(grads_got, grads_want, rtol=1e-6)
+  for g, w in zip(got, want, strict=True):  # float rounding: a few ulp of values near 1
+    np.testing.assert_allclose(g, w, atol=1e-6)
+  assert_grads_close(grads_got, grads_want, rtol=1e-5)
   cams = jax.tree.map(lambda *x: jnp.stack(x), cam, orbit_camera(2.0, 0.4, width=WIDTH,
                                                                  height=HEIGHT, distance=3.5))
   images = [jax.jit(jax.vmap(lambda c, s=s: render(gaussians, c, settings=s).rgb))(cams)

@@ -430,7 +430,7 @@ def test_batch_gradients_are_the_mean_of_the_views_and_stats_those_of_consecutiv
   mean_grads = jax.tree.map(lambda a, b: (a + b) / 2, per_view[0][1], per_view[1][1])
   for got, want in zip(jax.tree.leaves(batch.grads), jax.tree.leaves(mean_grads), strict=True):
     got, want = np.asarray(got), np.asarray(want)
-    assert np.max(np.abs(got - want)) <= 1e-5 * np.max(np.abs(want))
+    assert np.max(np.abs(got - want)) <= 1e-4 * np.max(np.abs(want))  # float32 sums
 
   # Two single-view steps from the same state: what each adds to the statistics.
   singles = [run.fn(state, data, jnp.asarray([v], jnp.int32), rows[i:i + 1].reshape(1, 1, -1))
