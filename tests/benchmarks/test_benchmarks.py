@@ -285,3 +285,17 @@ def test_scaling_measures_scoring_and_a_training_step_per_device_count():
   assert score[1]["per_second"] > 0 and score[1]["cpu_seconds"] > 0
   train, _ = scaling.training([1], views, setup, state, rounds=2)
   assert train[1]["per_second"] > 0 and len(train[1]["cpu_rounds"]) == 2
+
+
+def test_suite_tiers_names_the_modules_a_selection_leaves_untouched():
+  """`benchmarks/suite_tiers.py` on one small test file: the module it tests is touched,
+  modules it never calls are listed as untouched."""
+  suite_tiers, defaults = import_script("suite_tiers")
+  assert defaults["out"].startswith("workdirs/benchmarks/")
+  root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+  record = suite_tiers.run("not slow", 1, ["tests/core/test_streams.py"], root=root)
+  assert "passed" in record["tests"] and record["seconds"] > 0
+  assert 0 < record["line_coverage_percent"] < 100
+  assert "mfsample/streams.py" not in record["untouched_modules"]
+  assert "mfsample/data/colmap.py" in record["untouched_modules"]
+  assert len(record["untouched_modules"]) < record["modules"]
