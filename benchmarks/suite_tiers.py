@@ -76,6 +76,11 @@ def run(markers, workers, paths=(), root="."):
     subprocess.run([sys.executable, "-m", "coverage", "run", "--source=mfsample",
                     f"--data-file={import_data}", importer], cwd=root, check=True,
                    capture_output=True)
+    # (pyproject's `patch = ["subprocess"]` makes every process write a file of its own)
+    for data_file in (import_data, tier_data):
+      subprocess.run([sys.executable, "-m", "coverage", "combine", "--keep", "--append",
+                      f"--data-file={data_file}", *_parts(tmp, data_file)], cwd=root,
+                     check=False, capture_output=True)
     tier_lines, import_lines = executed_lines(tier_data), executed_lines(import_data)
     report = subprocess.run([sys.executable, "-m", "coverage", "report", "--precision=2",
                              f"--data-file={tier_data}", "--format=total"], cwd=root,
@@ -86,6 +91,12 @@ def run(markers, workers, paths=(), root="."):
   return {"markers": markers, "workers": workers, "seconds": round(seconds, 1),
           "tests": summary[-1].strip(), "line_coverage_percent": float(report.stdout.strip()),
           "modules": len(import_lines), "untouched_modules": untouched}
+
+
+def _parts(folder, data_file):
+  """The per-process data files of `data_file` in `folder` (`data_file.SUFFIX`)."""
+  stem = os.path.basename(data_file) + "."
+  return [os.path.join(folder, n) for n in os.listdir(folder) if n.startswith(stem)]
 
 
 def _only_definitions(path):

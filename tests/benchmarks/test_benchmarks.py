@@ -287,6 +287,7 @@ def test_scaling_measures_scoring_and_a_training_step_per_device_count():
   assert train[1]["per_second"] > 0 and len(train[1]["cpu_rounds"]) == 2
 
 
+@pytest.mark.slow
 def test_suite_tiers_names_the_modules_a_selection_leaves_untouched():
   """`benchmarks/suite_tiers.py` on one small test file: the module it tests is touched,
   modules it never calls are listed as untouched."""

@@ -435,3 +435,53 @@ def test_the_tiny_experiment_runs_end_to_end_and_resumes(tmp_path, monkeypatch):
     protocol.run_light_planning(changed, str(tmp_path / "b"))
   with open(tmp_path / "b" / "results.json") as f:
     assert json.load(f)["num_lights"] == 3
+
+
+# ------------------------------------------------------------------ pieces (the fast tier)
+
+
+def test_light_slots_hold_the_used_lights_and_pad_with_dark_slots():
+  """`protocol.light_slots`: slot i holds the captures under the i-th used light, the
+  remaining slots are zeros (never drawn)."""
+  import types
+
+  basis = np.random.default_rng(0).random((2, 4, 3, 3, 3)).astype(np.float32)  # [V, n, ...]
+  ctx = types.SimpleNamespace(config=types.SimpleNamespace(num_lights=3),
+                              data=types.SimpleNamespace(light_coeffs=4, train_basis=basis))
+  used = np.array([lights.uniform_light(4)])
+  images, slots = protocol.light_slots(ctx, used)
+  assert images.shape == (3, 2, 3, 3, 3) and slots.shape == (3, 4)
+  np.testing.assert_allclose(images[0], captures.capture(basis, used[0]), rtol=1e-6)
+  assert not np.any(np.asarray(images[1:])) and not np.any(np.asarray(slots[1:]))
+
+
+def test_image_metrics_and_the_tables_of_a_summary():
+  """20 dB for a uniform error of 0.1; the tables put the shared first light in column 1
+  of every strategy and a dash where a strategy has no figure."""
+  from mfsample.lighting import evaluate, tables
+
+  gt = np.full((2, 12, 12, 3), 0.5, np.float32)
+  metrics = evaluate.image_metrics(gt + 0.1, gt)
+  np.testing.assert_allclose(metrics["psnr"], 20.0, rtol=1e-5)
+  assert metrics["lpips"] is None and np.all(metrics["ssim"] < 1.0)
+  shared = {"metrics": {"psnr": 20.0}, "train_seconds": 1.0}
+  records = [{"strategy": "random", "label": "Random", "phases": [
+      {"lights": 2, "metrics": {"psnr": 21.5}, "u_ratio": 0.5, "plan_seconds": 0.1,
+       "train_seconds": 2.0}]}]
+  summary = tables.summarise(shared, records)
+  assert summary["random"]["train_seconds"] == [1.0, 2.0]
+  table = tables.by_lights_markdown(summary, 3)
+  assert table.splitlines()[2] == "| Random | 20.00 | 21.50 | - |"
+
+
+def test_u_over_directions_is_the_quadratic_form_of_each_point_light():
+  """U of the point light from every grid direction is xi^T Q xi; with Q = e_0 e_0^T (the
+  constant band only) it is the same from everywhere."""
+  from mfsample.lighting.figures import u_over_directions
+
+  q = np.zeros((4, 4))
+  q[0, 0] = 1.0
+  u, dirs = u_over_directions(q, 2.0, 4, 8)
+  assert u.shape == (4, 8) and dirs.shape == (4, 8, 3)
+  np.testing.assert_allclose(u, u.flat[0], rtol=1e-6)
+  assert u.flat[0] > 0

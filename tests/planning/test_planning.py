@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 import scipy.linalg
 from conftest import float64
-from planning_testlib import tiny_config, tiny_pool, trained_one_view
+from planning_testlib import random_model, tiny_config, tiny_pool, trained_one_view
 
 from mfsample import RenderSettings, jobs
 from mfsample import view_uncertainty as unc
@@ -497,3 +497,34 @@ def test_sizes_the_images_cannot_take_are_refused_before_anything_trains(field, 
   with pytest.raises(ConfigError, match=r"\(the dataset at data/lego\)"):
     check_image_size(config, 24, 24, "data/lego")
   check_image_size(config, 480, 480, "data/lego")
+
+
+# ------------------------------------------------------------------ pieces (the fast tier)
+
+
+def test_u_against_error_scores_candidates_and_ranks_their_error(tmp_path):
+  """`u_error.u_against_error` on an untrained model and three 8 x 8 candidates: U of each
+  (positive: B_hat spreads the Gaussians), the error only with images, the angle only with
+  training cameras; the landscape figure of such U values is written."""
+  from mfsample import orbit_camera
+  from mfsample.planning.figures import landscape_figure
+  from mfsample.planning.u_error import u_against_error
+
+  model = random_model(num=20)
+  cams = stack_cameras([orbit_camera(a, 0.3, width=8, height=8, distance=3.0)
+                        for a in (0.0, 2.0, 4.0)])
+  z = sample_z(model, 2)
+  plain = u_against_error(model, cams, z, background=jnp.zeros(3))
+  assert plain.u.shape == (3,) and np.all(plain.u > 0)
+  assert plain.error is None and plain.angle is None and plain.rho_u_error is None
+  images = np.zeros((3, 8, 8, 3), np.float32)
+  full = u_against_error(model, cams, z, background=jnp.zeros(3), images=images,
+                         train_cameras=stack_cameras([orbit_camera(0.0, 0.3, width=8,
+                                                                   height=8, distance=3.0)]))
+  np.testing.assert_allclose(full.u, plain.u, rtol=1e-6)
+  assert full.error.shape == (3,) and np.all(full.error > 0)
+  assert full.angle[0] == pytest.approx(0.0, abs=1e-3) and full.angle[1] > 0.5
+  land = {"values": np.outer([1.0, 2.0], plain.u), "u": [0.0, 0.5, 0.9], "v": [0.3, 0.6],
+          "train_uv": [[0.0, 0.4]], "trajectory": [[0.2, 0.5], [0.5, 0.45]]}
+  path = landscape_figure(land, str(tmp_path / "land.png"))
+  assert os.path.getsize(path) > 0

@@ -2,6 +2,7 @@
 
 import json
 import math
+import os
 
 import jax
 import jax.numpy as jnp
@@ -208,3 +209,47 @@ def test_posthoc_baseline_keeps_the_mean_and_scores_its_maps(tmp_path, monkeypat
       value = results["ause"]["summary"]["ause"][measure][key]["synthetic"]
       assert 0.0 <= value <= 1.0, (measure, key, value)
   assert "| Post-hoc B_hat: U (Eq. 10) |" in (tmp_path / "table.md").read_text()
+
+
+# ------------------------------------------------------------------ pieces (the fast tier)
+
+
+def test_a_config_with_no_part_enabled_is_refused_before_the_workdir_is_written(tmp_path):
+  from mfsample.configs.uncertainty_quality import get_config
+  from mfsample.quality.runner import run_uncertainty_quality
+
+  config = get_config("tiny")
+  config.ause.enabled = False
+  config.candidates.enabled = False
+  with pytest.raises(ValueError, match="both False: nothing to run"):
+    run_uncertainty_quality(config, str(tmp_path / "w"))
+  assert not (tmp_path / "w" / "results.json").exists()
+
+
+def test_paired_differences_pair_cases_with_the_other_settings_equal():
+  from mfsample.quality import candidates
+
+  assert candidates.case_name(400, "lowrank:2", 1, 3) == "steps400-lowrank2-seed1-views3"
+  rows = [{"round_steps": s, "sampler": "lowrank:2", "samples": m,
+           "per_case_rho_u_error": rho}
+          for s, m, rho in ((150, 2, [0.1, 0.2]), (150, 8, [0.5, 0.5]),
+                            (400, 2, [0.3, 0.1]), (400, 8, [0.6, 0.9]))]
+  paired = candidates.paired_differences(rows, "round_steps")
+  assert [(p["samples"], p["cases_above"], p["cases"]) for p in paired] == [(2, 1, 2), (8, 2, 2)]
+  assert paired[0]["mean"] == pytest.approx(0.05) and paired[1]["mean"] == pytest.approx(0.25)
+  assert paired[0]["sem"] == pytest.approx(np.std([0.2, -0.1], ddof=1) / np.sqrt(2))
+
+
+def test_the_scene_figure_shows_every_model_of_the_scene(tmp_path):
+  from mfsample.quality.figures import scene_figure
+  from mfsample.testing import synthetic_views
+
+  views, _ = synthetic_views(1, size=8, num_gaussians=5)  # (with exact depths)
+  record = {"scene": "s", "seed": 0, "model": "lowrank:2", "methods": ["u"],
+            "views": [{"depth_mae": 0.1, "ause": {"u": {"mae": 0.05}}}]}
+  unit = {"render": views.images, "depth_error": np.random.default_rng(0).random((1, 8, 8)),
+          "mask": np.ones((1, 8, 8), bool), "map_u": np.random.default_rng(1).random((1, 8, 8))}
+  path = scene_figure("s", views, [record], {("s", 0, "lowrank:2"): unit},
+                      str(tmp_path / "f.png"))
+  assert path and os.path.getsize(path) > 0
+  assert scene_figure("other", views, [record], {}, str(tmp_path / "g.png")) is None

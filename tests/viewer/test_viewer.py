@@ -314,3 +314,25 @@ def test_the_server_states_its_address_and_binds_to_this_machine(planning_workdi
   (message,) = said
   assert "camera planning" in message and "bound to 127.0.0.1" in message
   assert int(message.split("http://localhost:")[1].split()[0]) > 0  # the port bound
+
+
+def test_find_chromium_takes_the_first_browser_on_path(tmp_path, monkeypatch):
+  from mfsample.viewer import browser
+
+  monkeypatch.setenv("PATH", str(tmp_path))
+  assert browser.find_chromium() is None
+  with pytest.raises(browser.BrowserError, match="no Chromium on PATH"):
+    browser.Browser()
+  fake = tmp_path / "google-chrome"
+  fake.write_text("#!/bin/sh\n")
+  fake.chmod(0o755)
+  assert browser.find_chromium() == str(fake)
+
+
+def test_the_viewer_command_refuses_a_workdir_of_no_known_job_in_one_line(tmp_path):
+  """`mfsample viewer` (`viewer.command`) on a workdir whose config.json names no job."""
+  (tmp_path / "config.json").write_text('{"seed": 0}')
+  run = subprocess.run([sys.executable, "-m", "mfsample", "viewer", f"--workdir={tmp_path}",
+                        "--port=0"], capture_output=True, text=True, timeout=120)
+  assert run.returncode == 1 and "Traceback" not in run.stderr, run.stderr
+  assert "does not record which job wrote" in run.stderr

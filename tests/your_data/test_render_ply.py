@@ -102,3 +102,11 @@ def test_the_command_writes_a_png(ply, tmp_path):
                        capture_output=True, text=True, timeout=300)
   assert bad.returncode == 1 and bad.stderr.strip().splitlines()[-1].startswith(
       "error: .ply file not found")
+
+
+def test_the_installed_command_refuses_a_call_without_its_file_in_one_line():
+  """`mfsample render-ply` (`render_ply_command`): --ply and --out are required."""
+  run = subprocess.run([sys.executable, "-m", "mfsample", "render-ply", "--out=x.png"],
+                       capture_output=True, text=True, timeout=120)
+  assert run.returncode == 1 and "Traceback" not in run.stderr
+  assert "--ply" in run.stderr

@@ -99,3 +99,17 @@ def test_the_coloured_file_lights_up_where_an_unseen_view_is_uncertain(written):
   assert np.median(at(top)) > 2.0 * np.median(at(bottom)), (np.median(at(top)),
                                                             np.median(at(bottom)))
 
+
+
+def test_share_colours_run_from_dark_to_light_up_to_the_live_percentile():
+  """magma from 0 to the 99th percentile of the live Gaussians' shares: a larger share is a
+  lighter colour, a share above the top (or a dead Gaussian's) saturates."""
+  from mfsample.your_data.uncertainty_ply import share_colours
+
+  share = np.array([0.0, 1.0, 2.0, 3.0, 100.0])
+  live = np.array([True, True, True, True, False])
+  colours = share_colours(share, live)
+  assert colours.shape == (5, 3) and np.all((colours >= 0) & (colours <= 1))
+  brightness = colours.sum(-1)
+  assert np.all(np.diff(brightness[:4]) > 0)
+  np.testing.assert_allclose(colours[4], share_colours(share, live, percentile=100.0)[3])
