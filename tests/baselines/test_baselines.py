@@ -109,13 +109,14 @@ def test_acp_gains_are_differences_of_the_score():
 def test_activenerf_renders_the_variance_of_its_gaussians_blended_like_colours():
   """beta^2(p) = beta_min + sum_i w_i exp(s_i): with one log-variance s for every Gaussian,
   beta_min + exp(s) x the pixel's opacity."""
-  from mfsample import RenderSettings, orbit_camera, render
+  from render_testlib import SMALL as settings
+
+  from mfsample import orbit_camera, render
   from mfsample.baselines.activenerf import rendered_variance
   from mfsample.testing import random_gaussians
 
   gaussians = random_gaussians(12, sh_degree=0, seed=4)
   cam = orbit_camera(0.3, 0.4, width=8, height=8, distance=4.0)
-  settings = RenderSettings(max_intersections=4096, chunk_size=8, chunks_per_step=4)
   beta2, stats = rendered_variance(gaussians, jnp.full((12,), jnp.log(0.5)), cam, 0.01,
                                    settings=settings)
   alpha = render(gaussians, cam, settings=settings).alpha
