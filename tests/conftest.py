@@ -253,3 +253,26 @@ def tiny_dataset():
   from mfsample.config_blocks import data_spec
 
   return data_lib.load_dataset(data_spec(train_configs.get_config("tiny").data))
+
+
+# ------------------------------------------------------------------------- file order
+# With `-n 2 --dist loadfile` each worker takes whole files, in the order they are collected
+# (`--no-loadscope-reorder`): the files that take longest go first, so that neither worker is
+# left running one of them alone at the end. Their times are those of the end-of-run report
+# (seconds on two cores); a file not named keeps its place after them.
+LONGEST_FILES = (
+    "tests/docs/test_readme.py",
+    "tests/planning/test_planning.py",
+    "tests/your_data/test_next_views.py",
+    "tests/lighting/test_lighting.py",
+    "tests/renderer/test_render.py",
+    "tests/core/test_distributed.py",
+    "tests/core/test_api.py",
+    "tests/quality/test_quality.py",
+    "tests/benchmarks/test_benchmarks.py",
+)
+
+
+def pytest_collection_modifyitems(items):
+  rank = {name: i for i, name in enumerate(LONGEST_FILES)}
+  items.sort(key=lambda item: rank.get(item.location[0], len(rank)))  # stable
