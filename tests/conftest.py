@@ -1,7 +1,8 @@
 """Test-session setup.
 
-The suite is dominated by XLA compilation of many small, distinct programs, not by running
-them. Two XLA CPU settings cut that time without changing what is computed:
+Most tests compile many small, distinct XLA programs and run each once or twice (the jobs
+and training loops of the slow tests run theirs many times). Two XLA CPU settings cut the
+compile time without changing what is computed:
 
 * LLVM's backend optimisation level 0 (about a third of the compile time of
   tests/renderer/test_render.py): floating-point semantics are set by XLA's own flags,
@@ -258,8 +259,8 @@ def tiny_dataset():
 # ------------------------------------------------------------------------- file order
 # With `-n 2 --dist loadfile` each worker takes whole files, in the order they are collected
 # (`--no-loadscope-reorder`): the files that take longest go first, so that neither worker is
-# left running one of them alone at the end. Their times are those of the end-of-run report
-# (seconds on two cores); a file not named keeps its place after them.
+# left running one of them alone at the end. They are in the order of the end-of-run report's
+# slowest files; a file not named keeps its place after them.
 LONGEST_FILES = (
     "tests/docs/test_readme.py",
     "tests/planning/test_planning.py",
