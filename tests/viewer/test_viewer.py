@@ -5,6 +5,7 @@ The browser test needs Chromium (Debian's `chromium`; `.ci/run` installs it) and
 saying so, only where none is installed.
 """
 
+import json
 import os
 import socket
 import subprocess
@@ -244,7 +245,10 @@ def test_the_page_shows_the_plan_and_follows_the_run(planning_workdir, tmp_path)
       browser.open(f"http://127.0.0.1:{viewer.server.get_port()}/")
       browser.wait_for_text(first)
       (tab,) = viewer.tabs.values()
-      scene = tab.scene
+      # The page shows the step's title before the tab has drawn the step (the splats' colours
+      # are rendered first); the tab draws it holding the viewer's lock.
+      with viewer.lock:
+        scene = tab.scene
       assert isinstance(scene.get_handle_by_name("/splats"), viser.GaussianSplatHandle)
       assert isinstance(scene.get_handle_by_name("/train/0"), viser.CameraFrustumHandle)
       assert isinstance(scene.get_handle_by_name("/next/1"), viser.CameraFrustumHandle)
@@ -252,11 +256,16 @@ def test_the_page_shows_the_plan_and_follows_the_run(planning_workdir, tmp_path)
       colours = app.colormap(scores)
       for i in range(len(pool.candidates)):  # the candidates are coloured by U
         assert tuple(scene.get_handle_by_name(f"/candidates/{i}").color) == tuple(colours[i])
-      text = browser.text()
-      for node in ("/splats", "/train", "/candidates", "/next"):  # the scene tree
-        assert node in text, node
-      assert "candidates coloured by U" in text and "next view 1" in text
-      assert f"U as the job scored it: {scores[choice.index]:.4g}" in text
+      # The page's scene tree (viser's Dev Settings panel) lists the scene's nodes. The panel
+      # shows only briefly as the page loads, so its rows are read from the page's DOM, where
+      # they stay when it is hidden.
+      nodes = ("/splats", "/train", "/candidates", "/next")
+      assert browser.wait_for(" && ".join(
+          f"document.body.textContent.includes({json.dumps(n)})" for n in nodes))
+      # The panel follows the scene (the proposal's U is rendered after it).
+      for shown in ("candidates coloured by U", "next view 1",
+                    f"U as the job scored it: {scores[choice.index]:.4g}"):
+        browser.wait_for_text(shown)
       # The ground truth, render and U map side by side, decoded and inside the window.
       strip = (f"Array.from(document.images).filter(i => i.complete && "
                f"i.naturalHeight == {app.STRIP_HEIGHT})")
