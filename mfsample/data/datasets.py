@@ -22,6 +22,7 @@ that needs a capability checks `DataKind.offers`.
 """
 
 import dataclasses
+import functools
 import math
 from collections.abc import Callable
 from typing import NamedTuple
@@ -297,6 +298,9 @@ def _synthetic_capture(spec: DataSpec):
   return capture
 
 
+# A pure function of its spec that a job, the viewer and the tests load again and again (each
+# load renders every view); what it returns is immutable (JAX arrays, a read-only box).
+@functools.lru_cache(maxsize=8)
 def _synthetic(spec: DataSpec):
   """Random ground-truth Gaussians seen from their cameras; any pose has a ground truth."""
   capture = _synthetic_capture(spec)
@@ -312,6 +316,8 @@ def _synthetic(spec: DataSpec):
   truth = _synthetic_truth(s)
   sphere = _synthetic_sphere(spec) if s.cameras == "band" else SphereSpec.from_cameras(
       train.cameras)
+  for corner in box:
+    corner.setflags(write=False)
   return Dataset(train, test, spec.background, box, name="synthetic", sphere=sphere,
                  oracle=synthetic.Oracle(truth, spec.background))
 
