@@ -298,8 +298,8 @@ def _synthetic_capture(spec: DataSpec):
   return capture
 
 
-# A pure function of its spec that a job, the viewer and the tests load again and again (each
-# load renders every view); what it returns is immutable (JAX arrays, a read-only box).
+# A pure function of its spec that the viewer and the tests load again and again (each load
+# renders every view); what it returns is immutable (JAX arrays, a read-only box).
 @functools.lru_cache(maxsize=8)
 def _synthetic(spec: DataSpec):
   """Random ground-truth Gaussians seen from their cameras; any pose has a ground truth."""

@@ -223,7 +223,7 @@ def ascent_settings(config):
 def tiny(config):
   """24 x 24 images of a synthetic diffuse shell (no Mitsuba), n = 4, 3 lights, few steps."""
   config.num_lights = 3
-  config.steps_per_light = 15  # few: the tests run its steps at XLA level 0, 5x slower
+  config.steps_per_light = 15  # few: the tests run it at XLA's level 0, where steps dominate
   config.data.kind = "synthetic"
   config.data.width = 24
   config.data.height = 24
