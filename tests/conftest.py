@@ -12,6 +12,11 @@ compile time without changing what is computed:
   78 s to 24 s (one process, two CPU cores). Results agree to float rounding (a few ulp
   where two differently structured programs are compared). It is used where this JAX's
   XLA knows the flag (a subprocess asks it once per run; an unknown flag would abort).
+* One LLVM module per program (`--xla_cpu_parallel_codegen_split_count=1`) instead of
+  parts generated on parallel threads: with two workers on two cores there is no idle
+  core for those threads, and the programs run faster too (a tiny scene's render and
+  gradient, 300 Gaussians at 32 x 32: 75 ms against 93 ms at level 0). Results agree to
+  float rounding (one ulp of an image).
 
 A flag already in XLA_FLAGS is respected.
 
@@ -30,7 +35,8 @@ import sys
 import tempfile
 
 _FAST_COMPILE_FLAGS = ("--xla_backend_optimization_level=0",
-                       "--xla_cpu_use_fusion_emitters=false")
+                       "--xla_cpu_use_fusion_emitters=false",
+                       "--xla_cpu_parallel_codegen_split_count=1")
 
 
 def _xla_knows(flag):
@@ -265,10 +271,11 @@ LONGEST_FILES = (
     "tests/docs/test_readme.py",
     "tests/planning/test_planning.py",
     "tests/your_data/test_next_views.py",
-    "tests/lighting/test_lighting.py",
     "tests/renderer/test_render.py",
+    "tests/lighting/test_lighting.py",
     "tests/core/test_distributed.py",
     "tests/core/test_api.py",
+    "tests/train/test_train.py",
     "tests/quality/test_quality.py",
     "tests/benchmarks/test_benchmarks.py",
 )

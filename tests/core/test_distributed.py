@@ -63,9 +63,10 @@ def _free_port():
 
 def _environment(devices, **extra):
   """A subprocess's environment: CPU, `devices` host devices, `extra` variables."""
+  # The test session's XLA flags (tests/conftest.py: fast compiles) plus the device count.
+  flags = os.environ.get("XLA_FLAGS", "--xla_backend_optimization_level=0")
   env = dict(os.environ, JAX_PLATFORMS="cpu", PYTHONPATH=ROOT,
-             XLA_FLAGS=f"--xla_force_host_platform_device_count={devices} "
-                       "--xla_backend_optimization_level=0")
+             XLA_FLAGS=f"{flags} --xla_force_host_platform_device_count={devices}")
   env.update({k: str(v) for k, v in extra.items()})
   return env
 

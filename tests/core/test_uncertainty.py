@@ -176,7 +176,8 @@ _SHARDED = textwrap.dedent("""
 @pytest.mark.slow
 def test_candidate_scoring_and_samples_shard_over_devices():
   here = os.path.dirname(os.path.dirname(__file__))  # tests/, beside the package
-  env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=4",
+  flags = os.environ.get("XLA_FLAGS", "")  # the test session's (tests/conftest.py) and 4 devices
+  env = dict(os.environ, XLA_FLAGS=f"{flags} --xla_force_host_platform_device_count=4".strip(),
              PYTHONPATH=os.pathsep.join([os.path.dirname(here), here]), JAX_PLATFORMS="cpu")
   proc = subprocess.run([sys.executable, "-c", _SHARDED], env=env, capture_output=True,
                         text=True, timeout=300)
