@@ -1,8 +1,8 @@
 """Test-session setup.
 
 Most tests compile many small, distinct XLA programs and run each once or twice (the jobs
-and training loops of the slow tests run theirs many times). Two XLA CPU settings cut the
-compile time without changing what is computed:
+and training loops of the slow tests run theirs many times). Three XLA CPU settings cut their
+compile and run time without changing what is computed:
 
 * LLVM's backend optimisation level 0 (about a third of the compile time of
   tests/renderer/test_render.py): floating-point semantics are set by XLA's own flags,
@@ -13,10 +13,11 @@ compile time without changing what is computed:
   where two differently structured programs are compared). It is used where this JAX's
   XLA knows the flag (a subprocess asks it once per run; an unknown flag would abort).
 * One LLVM module per program (`--xla_cpu_parallel_codegen_split_count=1`) instead of
-  parts generated on parallel threads: with two workers on two cores there is no idle
-  core for those threads, and the programs run faster too (a tiny scene's render and
-  gradient, 300 Gaussians at 32 x 32: 75 ms against 93 ms at level 0). Results agree to
-  float rounding (one ulp of an image).
+  parts generated on parallel threads: with two workers on two cores no core is idle for
+  those threads, and the level-0 programs run faster as one module: in the suite (`-n 2`,
+  one run each) the API page's program (tests/core/test_api.py, a process of its own)
+  took 42 s with it against 57 s without. Results agree to float rounding (one ulp of an
+  image).
 
 A flag already in XLA_FLAGS is respected.
 
