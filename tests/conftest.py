@@ -16,8 +16,7 @@ compile and run time without changing what is computed:
   parts generated on parallel threads: with two workers on two cores no core is idle for
   those threads, and the level-0 programs run faster as one module: in the suite (`-n 2`,
   one run each) the API page's program (tests/core/test_api.py, a process of its own)
-  took 42 s with it against 57 s without. Results agree to float rounding (one ulp of an
-  image).
+  took 42 s with it against 57 s without. Results agree to float rounding (a few ulp).
 
 A flag already in XLA_FLAGS is respected.
 
