@@ -55,6 +55,12 @@ if "MFSAMPLE_TEST_XLA_FLAGS_SET" not in os.environ:
     if _flag.split("=")[0] not in os.environ.get("XLA_FLAGS", "") and _xla_knows(_flag):
       os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") + " " + _flag).strip()
 
+
+def xla_flags_with_host_devices(count):
+  """XLA_FLAGS for a subprocess with `count` host CPU devices: this run's flags and the count."""
+  return f"{os.environ.get('XLA_FLAGS', '')} --xla_force_host_platform_device_count={count}".strip()
+
+
 # One folder per test run, made by the first process that loads this file; the workers and
 # the subprocesses of tests inherit it.
 if "JAX_COMPILATION_CACHE_DIR" not in os.environ:

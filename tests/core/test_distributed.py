@@ -18,7 +18,7 @@ import time
 import jax
 import numpy as np
 import pytest
-from conftest import tiny_config, tiny_start, train_with
+from conftest import tiny_config, tiny_start, train_with, xla_flags_with_host_devices
 
 from mfsample import config_blocks, distributed
 from mfsample import view_uncertainty as unc
@@ -63,10 +63,8 @@ def _free_port():
 
 def _environment(devices, **extra):
   """A subprocess's environment: CPU, `devices` host devices, `extra` variables."""
-  # The test session's XLA flags (tests/conftest.py: fast compiles) plus the device count.
-  flags = os.environ.get("XLA_FLAGS", "--xla_backend_optimization_level=0")
   env = dict(os.environ, JAX_PLATFORMS="cpu", PYTHONPATH=ROOT,
-             XLA_FLAGS=f"{flags} --xla_force_host_platform_device_count={devices}")
+             XLA_FLAGS=xla_flags_with_host_devices(devices))
   env.update({k: str(v) for k, v in extra.items()})
   return env
 

@@ -10,7 +10,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from conftest import float64
+from conftest import float64, xla_flags_with_host_devices
 from planning_testlib import opposite_uv, random_model, sphere_for, tiny_pool, trained_one_view
 
 from mfsample import RenderSettings
@@ -176,8 +176,7 @@ _SHARDED = textwrap.dedent("""
 @pytest.mark.slow
 def test_candidate_scoring_and_samples_shard_over_devices():
   here = os.path.dirname(os.path.dirname(__file__))  # tests/, beside the package
-  flags = os.environ.get("XLA_FLAGS", "")  # the test session's (tests/conftest.py) and 4 devices
-  env = dict(os.environ, XLA_FLAGS=f"{flags} --xla_force_host_platform_device_count=4".strip(),
+  env = dict(os.environ, XLA_FLAGS=xla_flags_with_host_devices(4),
              PYTHONPATH=os.pathsep.join([os.path.dirname(here), here]), JAX_PLATFORMS="cpu")
   proc = subprocess.run([sys.executable, "-c", _SHARDED], env=env, capture_output=True,
                         text=True, timeout=300)
