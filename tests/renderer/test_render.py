@@ -368,7 +368,7 @@ def test_screen_offset_moves_the_2d_centres_and_reports_footprints():
   base = render(g, cam, settings=SMALL)
   zero = render(g, cam, settings=SMALL, screen_offset=jnp.zeros((g.num_gaussians, 2)))
   # Equal on a CPU; on a GPU XLA fuses the added zeros into a differently ordered program,
-  # which moves a few pixels by one float32 ulp (seen on an H200), so allow a few ulp.
+  # which moves a few pixels by one float32 ulp, so allow a few ulp.
   np.testing.assert_allclose(np.asarray(zero.rgb), np.asarray(base.rgb), rtol=5e-7, atol=1e-7)
   assert base.radii.shape == base.visible.shape == (g.num_gaussians,)
   np.testing.assert_array_equal(np.asarray(base.radii)[~np.asarray(base.visible)], 0.0)
